@@ -1,0 +1,18 @@
+//! The coordinator: CLOP, pickOut and the evolving loop as pure state
+//! machines, the durable journal, and the zenoh dispatch that drives them.
+//!
+//! Modules: [`clop`] (the optimiser, ask/tell), [`problems`] (CLOP's artificial
+//! test problems), [`bench`] (the CLOP benchmark harness).
+//!
+//! The optimiser and the loop must not do I/O, read a clock or draw from an
+//! unseeded random stream; side effects (journal, publishing, progress) hang
+//! off them as sinks.
+#![warn(missing_docs)]
+
+pub mod bench;
+pub mod clop;
+pub mod evolve;
+pub mod journal;
+pub mod problems;
+pub mod run;
+pub mod service;

@@ -1,0 +1,514 @@
+//! Experiment files (TOML): what to optimise, how, and with which constants.
+//!
+//! A file is parsed strictly (unknown keys are errors) and then validated as a
+//! whole; every error names the field (and the line when the TOML parser knows
+//! it). Defaults are the paper's (Table III) and the CLOP reference's.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use crate::{keys, params};
+
+/// Why an experiment file was refused.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum ExperimentError {
+    /// The TOML could not be parsed into an experiment (syntax, unknown key, wrong type).
+    #[error("experiment file: {0}")]
+    Parse(String),
+    /// A field has a value that makes no sense.
+    #[error("experiment file: field `{field}`: {message}")]
+    Invalid {
+        /// Path of the offending field, e.g. `parameter[1].lower`.
+        field: String,
+        /// What is wrong with it.
+        message: String,
+    },
+}
+
+fn invalid(field: impl Into<String>, message: impl Into<String>) -> ExperimentError {
+    ExperimentError::Invalid {
+        field: field.into(),
+        message: message.into(),
+    }
+}
+
+/// How CLOP maps a parameter onto its internal `[-1, 1]` coordinate (clop.md §2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ParamKind {
+    /// Real, linear mapping.
+    Linear,
+    /// Integer, one cell per integer.
+    Integer,
+    /// Real, logarithmic mapping (`lower > 0`).
+    Gamma,
+    /// Integer, logarithmic mapping (`lower >= 1`).
+    IntegerGamma,
+}
+
+/// One optimised parameter: a dimension of the space L.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ParamSpec {
+    /// Identifier, one of [`params::KNOWN`].
+    pub name: String,
+    /// Mapping kind (default linear).
+    #[serde(default = "default_kind")]
+    pub kind: ParamKind,
+    /// Lower bound (external units).
+    pub lower: f64,
+    /// Upper bound (external units).
+    pub upper: f64,
+    /// The expert value; absent means the registry's default.
+    #[serde(default)]
+    pub expert: Option<f64>,
+}
+
+fn default_kind() -> ParamKind {
+    ParamKind::Linear
+}
+
+impl ParamSpec {
+    /// The expert value, or the registry's default when the file gives none.
+    #[must_use]
+    pub fn expert_value(&self) -> f64 {
+        self.expert
+            .or_else(|| params::find(&self.name).map(|p| p.default))
+            .unwrap_or((self.lower + self.upper) / 2.0)
+    }
+}
+
+/// Which trial model the workers run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum TrialModel {
+    /// The rebuilt NAO in rapier3d, walking (the real thing).
+    #[default]
+    Nao,
+    /// A cheap deterministic noisy stand-in with the same parameter names.
+    Synthetic,
+}
+
+impl TrialModel {
+    /// Parses `nao` or `synthetic`.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        match s {
+            "nao" => Ok(Self::Nao),
+            "synthetic" => Ok(Self::Synthetic),
+            other => Err(format!(
+                "unknown trial model `{other}` (expected `nao` or `synthetic`)"
+            )),
+        }
+    }
+}
+
+/// Where the evolving process starts (evolve.md, Algorithm 1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Start {
+    /// ν′ undefined, H empty.
+    #[default]
+    Scratch,
+    /// The expert set is evaluated first and becomes ν′.
+    Expert,
+}
+
+/// The constants of pickOut (Algorithm 2); defaults from the paper's Table III.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PickOutConstants {
+    /// Minimum success rate (default 0.75).
+    pub success_rate: f64,
+    /// Maximum my/mx (default 0.25).
+    pub xy_ratio: f64,
+    /// REJECT below m′x − α·e′x (default 3.0).
+    pub alpha: f64,
+    /// EQUIVALENT below m′x − β·e′x (default 1.0); β < α.
+    pub beta: f64,
+    /// ACCEPT when ex < γ·e′x (default 0.7).
+    pub gamma: f64,
+}
+
+impl Default for PickOutConstants {
+    fn default() -> Self {
+        Self {
+            success_rate: 0.75,
+            xy_ratio: 0.25,
+            alpha: 3.0,
+            beta: 1.0,
+            gamma: 0.7,
+        }
+    }
+}
+
+/// CLOP's settings (clop.md §10); defaults are the reference's for real runs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ClopSettings {
+    /// Confidence H (default 3).
+    pub h: f64,
+    /// Draw model strength in Elo (default 0 = binary).
+    pub draw_elo: f64,
+    /// Full quadratic (true, default) or diagonal only.
+    pub correlations: bool,
+    /// Gaussian prior precision λ (default 0.01).
+    pub prior_strength: f64,
+    /// Refresh schedule (default 0.1; 0 = after every outcome).
+    pub refresh_rate: f64,
+    /// Weight iterations per refresh (default 7; 0 = to convergence).
+    pub max_weight_iterations: u32,
+    /// Sampler steps per dimension (default 1000).
+    pub n_mcmc: u32,
+    /// Radius growth with n, ρ (default 0).
+    pub localization_power: f64,
+}
+
+impl Default for ClopSettings {
+    fn default() -> Self {
+        Self {
+            h: 3.0,
+            draw_elo: 0.0,
+            correlations: true,
+            prior_strength: 0.01,
+            refresh_rate: 0.1,
+            max_weight_iterations: 7,
+            n_mcmc: 1000,
+            localization_power: 0.0,
+        }
+    }
+}
+
+/// A parsed, validated experiment.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Experiment {
+    /// Run name; one key-expression chunk (letters, digits, `-`, `_`, `.`).
+    pub name: String,
+    /// Seed of every random stream of the run.
+    pub seed: u64,
+    /// Number of CLOP iterations (Algorithm 1's n).
+    pub iterations: u64,
+    /// Trials per iteration (default 10).
+    #[serde(default = "default_trials")]
+    pub trials_per_iteration: u32,
+    /// Simulated duration of one trial, s (default 10).
+    #[serde(default = "default_duration")]
+    pub trial_duration_s: f64,
+    /// Iterations in flight at once, D (default 4).
+    #[serde(default = "default_depth")]
+    pub pipeline_depth: u32,
+    /// Trial model (default `nao`).
+    #[serde(default)]
+    pub model: TrialModel,
+    /// League robot type 0–4 (default 0).
+    #[serde(default)]
+    pub robot_type: u8,
+    /// Start from scratch (default) or from the expert set.
+    #[serde(default)]
+    pub start: Start,
+    /// The optimised parameters, in CLOP's coordinate order.
+    pub parameter: Vec<ParamSpec>,
+    /// Values for known parameters that are not optimised (default: registry defaults).
+    #[serde(default)]
+    pub fixed: BTreeMap<String, f64>,
+    /// pickOut constants.
+    #[serde(default)]
+    pub pickout: PickOutConstants,
+    /// CLOP settings.
+    #[serde(default)]
+    pub clop: ClopSettings,
+}
+
+fn default_trials() -> u32 {
+    10
+}
+fn default_duration() -> f64 {
+    10.0
+}
+fn default_depth() -> u32 {
+    4
+}
+
+impl Experiment {
+    /// Parses and validates the text of an experiment file.
+    pub fn from_toml(text: &str) -> Result<Self, ExperimentError> {
+        let e: Experiment = toml::from_str(text)
+            .map_err(|e| ExperimentError::Parse(e.to_string().trim().into()))?;
+        e.validate()?;
+        Ok(e)
+    }
+
+    /// Checks every field; the first problem found is returned.
+    pub fn validate(&self) -> Result<(), ExperimentError> {
+        keys::check_chunk("run name", &self.name).map_err(|m| invalid("name", m))?;
+        if self.iterations == 0 {
+            return Err(invalid("iterations", "must be at least 1"));
+        }
+        if self.trials_per_iteration == 0 {
+            return Err(invalid("trials_per_iteration", "must be at least 1"));
+        }
+        if self.trials_per_iteration > 10_000 {
+            return Err(invalid("trials_per_iteration", "must be at most 10000"));
+        }
+        finite_positive("trial_duration_s", self.trial_duration_s)?;
+        if self.trial_duration_s > 3600.0 {
+            return Err(invalid("trial_duration_s", "must be at most 3600 s"));
+        }
+        if self.pipeline_depth == 0 || self.pipeline_depth > 1000 {
+            return Err(invalid("pipeline_depth", "must be in 1..=1000"));
+        }
+        if self.robot_type > 4 {
+            return Err(invalid("robot_type", "must be 0, 1, 2, 3 or 4"));
+        }
+        if self.parameter.is_empty() {
+            return Err(invalid("parameter", "at least one [[parameter]] is needed"));
+        }
+        for (i, p) in self.parameter.iter().enumerate() {
+            let f = |s: &str| format!("parameter[{i}].{s}");
+            params::find(&p.name).ok_or_else(|| {
+                invalid(
+                    f("name"),
+                    format!(
+                        "unknown parameter `{}` (known: {})",
+                        p.name,
+                        params::KNOWN
+                            .iter()
+                            .map(|k| k.name)
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                )
+            })?;
+            if self.parameter[..i].iter().any(|q| q.name == p.name) {
+                return Err(invalid(f("name"), format!("`{}` is listed twice", p.name)));
+            }
+            for (field, v) in [("lower", p.lower), ("upper", p.upper)] {
+                params::check_value(&p.name, v).map_err(|m| invalid(f(field), m))?;
+            }
+            if p.lower >= p.upper {
+                return Err(invalid(
+                    f("lower"),
+                    format!("lower ({}) must be below upper ({})", p.lower, p.upper),
+                ));
+            }
+            if let Some(x) = p.expert {
+                if !x.is_finite() || x < p.lower || x > p.upper {
+                    return Err(invalid(
+                        f("expert"),
+                        format!("{x} is outside [{}, {}]", p.lower, p.upper),
+                    ));
+                }
+            }
+            match p.kind {
+                ParamKind::Gamma if p.lower <= 0.0 => {
+                    return Err(invalid(f("lower"), "a gamma parameter needs lower > 0"))
+                }
+                ParamKind::IntegerGamma if p.lower < 1.0 => {
+                    return Err(invalid(
+                        f("lower"),
+                        "an integer_gamma parameter needs lower >= 1",
+                    ))
+                }
+                ParamKind::Integer | ParamKind::IntegerGamma
+                    if p.lower.fract() != 0.0 || p.upper.fract() != 0.0 =>
+                {
+                    return Err(invalid(
+                        f("lower"),
+                        "integer parameters need integer bounds",
+                    ))
+                }
+                _ => {}
+            }
+        }
+        for (name, v) in &self.fixed {
+            let field = format!("fixed.{name}");
+            params::check_value(name, *v).map_err(|m| invalid(&field, m))?;
+            if self.parameter.iter().any(|p| &p.name == name) {
+                return Err(invalid(field, "is also an optimised [[parameter]]"));
+            }
+        }
+        let k = &self.pickout;
+        for (field, v) in [
+            ("pickout.success_rate", k.success_rate),
+            ("pickout.xy_ratio", k.xy_ratio),
+            ("pickout.alpha", k.alpha),
+            ("pickout.beta", k.beta),
+            ("pickout.gamma", k.gamma),
+        ] {
+            if !v.is_finite() || v < 0.0 {
+                return Err(invalid(field, format!("{v} is not a finite number >= 0")));
+            }
+        }
+        if k.success_rate > 1.0 {
+            return Err(invalid("pickout.success_rate", "must be at most 1"));
+        }
+        if k.beta >= k.alpha {
+            return Err(invalid(
+                "pickout.beta",
+                format!("beta ({}) must be below alpha ({})", k.beta, k.alpha),
+            ));
+        }
+        let c = &self.clop;
+        for (field, v) in [
+            ("clop.h", c.h),
+            ("clop.draw_elo", c.draw_elo),
+            ("clop.refresh_rate", c.refresh_rate),
+            ("clop.localization_power", c.localization_power),
+        ] {
+            if !v.is_finite() || v < 0.0 {
+                return Err(invalid(field, format!("{v} is not a finite number >= 0")));
+            }
+        }
+        finite_positive("clop.prior_strength", c.prior_strength)?;
+        if c.n_mcmc == 0 {
+            return Err(invalid("clop.n_mcmc", "must be at least 1"));
+        }
+        Ok(())
+    }
+
+    /// Names of the optimised parameters, in CLOP order.
+    #[must_use]
+    pub fn param_names(&self) -> Vec<String> {
+        self.parameter.iter().map(|p| p.name.clone()).collect()
+    }
+
+    /// The expert set: each optimised parameter at its expert value.
+    #[must_use]
+    pub fn expert_values(&self) -> Vec<f64> {
+        self.parameter.iter().map(ParamSpec::expert_value).collect()
+    }
+
+    /// Every value a worker needs: the optimised `values` (CLOP order) plus the fixed ones.
+    #[must_use]
+    pub fn full_params(&self, values: &[f64]) -> Vec<(String, f64)> {
+        let mut out: Vec<(String, f64)> = self
+            .parameter
+            .iter()
+            .zip(values)
+            .map(|(p, v)| (p.name.clone(), *v))
+            .collect();
+        out.extend(self.fixed.iter().map(|(k, v)| (k.clone(), *v)));
+        out
+    }
+
+    /// Whether `values` lie inside L (finite, within each parameter's bounds).
+    pub fn check_in_space(&self, values: &[f64]) -> Result<(), String> {
+        if values.len() != self.parameter.len() {
+            return Err(format!(
+                "{} values for {} parameters",
+                values.len(),
+                self.parameter.len()
+            ));
+        }
+        for (p, v) in self.parameter.iter().zip(values) {
+            if !v.is_finite() || *v < p.lower || *v > p.upper {
+                return Err(format!(
+                    "`{}` = {v} is outside [{}, {}]",
+                    p.name, p.lower, p.upper
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+fn finite_positive(field: &str, v: f64) -> Result<(), ExperimentError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(invalid(field, format!("{v} is not a finite number > 0")))
+    }
+}
+
+/// A stable 64-bit hash (FNV-1a) of an experiment file's text, for the journal header.
+#[must_use]
+pub fn text_hash(text: &str) -> u64 {
+    text.bytes().fold(0xcbf2_9ce4_8422_2325_u64, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"
+name = "t"
+seed = 1
+iterations = 5
+
+[[parameter]]
+name = "ThighRelHip2_Z"
+lower = -0.08
+upper = -0.03
+expert = -0.04
+"#;
+
+    fn err(text: &str) -> String {
+        Experiment::from_toml(text).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn parses_with_defaults() {
+        let e = Experiment::from_toml(GOOD).unwrap();
+        assert_eq!(e.trials_per_iteration, 10);
+        assert_eq!(e.pickout, PickOutConstants::default());
+        assert_eq!(e.clop.h, 3.0);
+        assert_eq!(e.model, TrialModel::Nao);
+        assert_eq!(e.expert_values(), vec![-0.04]);
+    }
+
+    #[test]
+    fn each_malformed_variant_names_its_problem() {
+        let cases: &[(&str, &str, &str)] = &[
+            ("seed = 1", "seed = 1\nbogus = 3", "bogus"),
+            ("upper = -0.03", "upper = -0.09", "parameter[0].lower"),
+            ("expert = -0.04", "expert = -0.02", "parameter[0].expert"),
+            (
+                "iterations = 5",
+                "iterations = 5\ntrials_per_iteration = 0",
+                "trials_per_iteration",
+            ),
+            (
+                "\"ThighRelHip2_Z\"",
+                "\"ThighLength\"",
+                "unknown parameter `ThighLength`",
+            ),
+            ("lower = -0.08", "lower = nan", "parameter[0].lower"),
+            (
+                "iterations = 5",
+                "iterations = 5\n[pickout]\nbeta = 3.0",
+                "pickout.beta",
+            ),
+            (
+                "iterations = 5",
+                "iterations = 5\ntrial_duration_s = inf",
+                "trial_duration_s",
+            ),
+            ("name = \"t\"", "name = \"a/b\"", "name"),
+            ("lower = -0.08", "lower = -0.5", "admissible range"),
+        ];
+        for (from, to, needle) in cases {
+            let text = GOOD.replacen(from, to, 1);
+            assert_ne!(text, GOOD, "{from}");
+            let msg = err(&text);
+            assert!(msg.contains(needle), "{to}: {msg}");
+        }
+    }
+
+    #[test]
+    fn syntax_errors_carry_a_line() {
+        let msg = err("name = \"t\"\nseed = \n");
+        assert!(msg.contains("line 2"), "{msg}");
+    }
+
+    #[test]
+    fn shipped_experiments_parse() {
+        for f in ["physical.toml", "physical-technical.toml"] {
+            let path = format!("{}/../experiments/{f}", env!("CARGO_MANIFEST_DIR"));
+            let text = std::fs::read_to_string(&path).unwrap();
+            Experiment::from_toml(&text).unwrap_or_else(|e| panic!("{f}: {e}"));
+        }
+    }
+}

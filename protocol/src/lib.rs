@@ -1,0 +1,23 @@
+//! naofarm's shared language: the experiment file format, the parameter
+//! registry, the wire messages exchanged by coordinator, workers and watchers,
+//! and the zenoh key expressions they travel on.
+//!
+//! Modules: [`experiment`] (TOML experiment files and their validation),
+//! [`params`] (the known parameter names and their admissible ranges),
+//! [`wire`] (versioned bincode envelope, one encode/decode per message),
+//! [`keys`] (every key expression naofarm uses).
+//!
+//! This crate must not do I/O, open zenoh sessions, read clocks or draw
+//! random numbers: it only describes and checks data.
+#![warn(missing_docs)]
+
+pub mod experiment;
+pub mod keys;
+pub mod params;
+pub mod wire;
+
+pub use experiment::{Experiment, ExperimentError, ParamKind, ParamSpec, TrialModel};
+pub use wire::{
+    Decision, DecodeError, IterationResult, RunStatus, Stats, TrialOutcome, TrialRequest,
+    WireMessage, WorkerPresence, WIRE_VERSION,
+};

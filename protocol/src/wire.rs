@@ -1,0 +1,638 @@
+//! Wire messages and their codec.
+//!
+//! Every message travels as `b"NF"`, a version byte, a kind byte, then the
+//! message body in bincode 2 (serde mode, standard config). [`WireMessage`]
+//! gives each message exactly one `encode` and one `decode`; decoding caps the
+//! size before allocating, rejects trailing bytes, and checks every field
+//! ([`WireMessage::validate`]), so a decoded message is always a sane one.
+//! Watched topics (results, status) also have a JSON form (`to_json`).
+
+use serde::{de::DeserializeOwned, Deserialize, Serialize};
+
+use crate::experiment::TrialModel;
+
+/// Version of the envelope and message layout.
+pub const WIRE_VERSION: u8 = 1;
+/// Largest message accepted, in bytes (checked before any allocation).
+pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
+const MAGIC: [u8; 2] = *b"NF";
+const HEADER: usize = 4;
+
+/// Why bytes could not be decoded into a message.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum DecodeError {
+    /// The buffer exceeds [`MAX_MESSAGE_BYTES`].
+    #[error("{message}: {len} bytes exceeds the limit of {MAX_MESSAGE_BYTES}")]
+    TooLarge {
+        /// Expected message.
+        message: &'static str,
+        /// Size received.
+        len: usize,
+    },
+    /// No envelope: too short or wrong magic.
+    #[error("{message}: not a naofarm envelope")]
+    NotAnEnvelope {
+        /// Expected message.
+        message: &'static str,
+    },
+    /// The envelope's version is not ours.
+    #[error("{message}: envelope version {found}, this build speaks {WIRE_VERSION}")]
+    Version {
+        /// Expected message.
+        message: &'static str,
+        /// Version found.
+        found: u8,
+    },
+    /// The envelope carries another kind of message.
+    #[error("{message}: envelope holds message kind {found}, expected {expected}")]
+    WrongKind {
+        /// Expected message.
+        message: &'static str,
+        /// Kind byte expected.
+        expected: u8,
+        /// Kind byte found.
+        found: u8,
+    },
+    /// The body is not valid bincode for the message.
+    #[error("{message}: malformed body: {detail}")]
+    Body {
+        /// Expected message.
+        message: &'static str,
+        /// The codec's explanation.
+        detail: String,
+    },
+    /// Bytes remain after the body.
+    #[error("{message}: {extra} trailing bytes after the body")]
+    Trailing {
+        /// Expected message.
+        message: &'static str,
+        /// Number of bytes left over.
+        extra: usize,
+    },
+    /// The body decoded but a field is out of range.
+    #[error("{message}: field `{field}`: {problem}")]
+    Field {
+        /// Expected message.
+        message: &'static str,
+        /// The offending field.
+        field: &'static str,
+        /// What is wrong.
+        problem: String,
+    },
+}
+
+/// A message with a fixed kind byte, one encoding and one checked decoding.
+pub trait WireMessage: Serialize + DeserializeOwned + Sized {
+    /// Human name used in errors.
+    const NAME: &'static str;
+    /// Kind byte in the envelope.
+    const KIND: u8;
+
+    /// Field-level checks run after decoding (and before encoding in tests).
+    fn validate(&self) -> Result<(), (&'static str, String)>;
+
+    /// Encodes the message inside the envelope.
+    #[must_use]
+    fn encode(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(64);
+        out.extend_from_slice(&MAGIC);
+        out.push(WIRE_VERSION);
+        out.push(Self::KIND);
+        // Serialising plain data structs into a Vec cannot fail.
+        let body =
+            bincode::serde::encode_to_vec(self, bincode::config::standard()).unwrap_or_default();
+        out.extend_from_slice(&body);
+        out
+    }
+
+    /// Decodes and checks a message.
+    fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
+        let message = Self::NAME;
+        if bytes.len() > MAX_MESSAGE_BYTES {
+            return Err(DecodeError::TooLarge {
+                message,
+                len: bytes.len(),
+            });
+        }
+        if bytes.len() < HEADER || bytes[..2] != MAGIC {
+            return Err(DecodeError::NotAnEnvelope { message });
+        }
+        if bytes[2] != WIRE_VERSION {
+            return Err(DecodeError::Version {
+                message,
+                found: bytes[2],
+            });
+        }
+        if bytes[3] != Self::KIND {
+            return Err(DecodeError::WrongKind {
+                message,
+                expected: Self::KIND,
+                found: bytes[3],
+            });
+        }
+        let body = &bytes[HEADER..];
+        let cfg = bincode::config::standard().with_limit::<MAX_MESSAGE_BYTES>();
+        let (value, used): (Self, usize) =
+            bincode::serde::decode_from_slice(body, cfg).map_err(|e| DecodeError::Body {
+                message,
+                detail: e.to_string(),
+            })?;
+        if used != body.len() {
+            return Err(DecodeError::Trailing {
+                message,
+                extra: body.len() - used,
+            });
+        }
+        value
+            .validate()
+            .map_err(|(field, problem)| DecodeError::Field {
+                message,
+                field,
+                problem,
+            })?;
+        Ok(value)
+    }
+
+    /// The documented JSON form (for watched topics and `--json` output).
+    #[must_use]
+    fn to_json(&self) -> String {
+        serde_json::to_string(self).unwrap_or_default()
+    }
+
+    /// Parses and checks the JSON form.
+    fn from_json(text: &str) -> Result<Self, DecodeError> {
+        let value: Self = serde_json::from_str(text).map_err(|e| DecodeError::Body {
+            message: Self::NAME,
+            detail: e.to_string(),
+        })?;
+        value
+            .validate()
+            .map_err(|(field, problem)| DecodeError::Field {
+                message: Self::NAME,
+                field,
+                problem,
+            })?;
+        Ok(value)
+    }
+}
+
+type Check = Result<(), (&'static str, String)>;
+
+fn finite(field: &'static str, v: f64) -> Check {
+    if v.is_finite() {
+        Ok(())
+    } else {
+        Err((field, format!("{v} is not a finite number")))
+    }
+}
+
+fn finite_opt(field: &'static str, v: Option<f64>) -> Check {
+    v.map_or(Ok(()), |v| finite(field, v))
+}
+
+fn chunk(field: &'static str, s: &str) -> Check {
+    crate::keys::check_chunk(field, s).map_err(|m| (field, m))
+}
+
+fn param_list(field: &'static str, ps: &[(String, f64)]) -> Check {
+    if ps.len() > 64 {
+        return Err((field, format!("{} parameters, at most 64", ps.len())));
+    }
+    for (name, v) in ps {
+        crate::params::check_value(name, *v).map_err(|m| (field, m))?;
+    }
+    Ok(())
+}
+
+/// A request to run one trial: everything a stateless worker needs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrialRequest {
+    /// Run name.
+    pub run: String,
+    /// CLOP iteration index i.
+    pub iteration: u64,
+    /// Trial index k within the iteration.
+    pub trial: u32,
+    /// The trial's seed, derived only from (run seed, i, k).
+    pub seed: u64,
+    /// Which trial model to run.
+    pub model: TrialModel,
+    /// League robot type 0–4.
+    pub robot_type: u8,
+    /// Simulated duration, s.
+    pub duration_s: f64,
+    /// Every parameter of the robot and the walk, by name (external units).
+    pub params: Vec<(String, f64)>,
+    /// Dispatch number; a re-dispatched trial gets a new one.
+    pub dispatch: u64,
+}
+
+impl WireMessage for TrialRequest {
+    const NAME: &'static str = "TrialRequest";
+    const KIND: u8 = 1;
+    fn validate(&self) -> Check {
+        chunk("run", &self.run)?;
+        if self.robot_type > 4 {
+            return Err(("robot_type", format!("{} is not 0..=4", self.robot_type)));
+        }
+        finite("duration_s", self.duration_s)?;
+        if self.duration_s <= 0.0 || self.duration_s > 3600.0 {
+            return Err((
+                "duration_s",
+                format!("{} is not in (0, 3600]", self.duration_s),
+            ));
+        }
+        param_list("params", &self.params)
+    }
+}
+
+/// One trial's outcome, as a worker reports it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrialOutcome {
+    /// Run name.
+    pub run: String,
+    /// CLOP iteration index i.
+    pub iteration: u64,
+    /// Trial index k.
+    pub trial: u32,
+    /// The seed the trial ran with.
+    pub seed: u64,
+    /// Dispatch number of the request answered.
+    pub dispatch: u64,
+    /// Id of the worker that ran it.
+    pub worker: String,
+    /// Whether the robot fell.
+    pub fell: bool,
+    /// Final torso x (forward), m.
+    pub x_m: f64,
+    /// Final torso y (left), m.
+    pub y_m: f64,
+    /// Simulated time of the fall, s (absent when it did not fall).
+    pub fall_time_s: Option<f64>,
+    /// Simulated time actually run, s.
+    pub sim_time_s: f64,
+    /// Wall-clock time the trial took on the worker, s.
+    pub wall_time_s: f64,
+}
+
+impl WireMessage for TrialOutcome {
+    const NAME: &'static str = "TrialOutcome";
+    const KIND: u8 = 2;
+    fn validate(&self) -> Check {
+        chunk("run", &self.run)?;
+        if self.worker.len() > 128 {
+            return Err(("worker", "longer than 128 bytes".into()));
+        }
+        finite("x_m", self.x_m)?;
+        finite("y_m", self.y_m)?;
+        finite_opt("fall_time_s", self.fall_time_s)?;
+        finite("sim_time_s", self.sim_time_s)?;
+        finite("wall_time_s", self.wall_time_s)?;
+        if self.sim_time_s < 0.0 {
+            return Err(("sim_time_s", "negative".into()));
+        }
+        if self.fell != self.fall_time_s.is_some() {
+            return Err(("fall_time_s", "present exactly when fell is true".into()));
+        }
+        Ok(())
+    }
+}
+
+/// pickOut's decision (Algorithm 2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "SCREAMING_SNAKE_CASE")]
+pub enum Decision {
+    /// Better: a CLOP win, and ν′ ← ν.
+    Accept,
+    /// About as good: a CLOP draw.
+    Equivalent,
+    /// Worse: a CLOP loss.
+    Reject,
+}
+
+/// An iteration's statistics (evolve.md: m and e over successful trials).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Stats {
+    /// Number of trials.
+    pub trials: u32,
+    /// Trials that did not fall.
+    pub successes: u32,
+    /// Success rate s = successes / trials.
+    pub s: f64,
+    /// Mean forward distance over successful trials, m (absent with none).
+    pub mx: Option<f64>,
+    /// Mean |lateral distance| over successful trials, m.
+    pub my: Option<f64>,
+    /// Sample standard deviation of x over successful trials, m (absent with fewer than 2).
+    pub ex: Option<f64>,
+    /// Sample standard deviation of |y| over successful trials, m.
+    pub ey: Option<f64>,
+    /// Mean forward distance over all trials, m.
+    pub mx_all: f64,
+    /// Mean |lateral distance| over all trials, m.
+    pub my_all: f64,
+}
+
+impl Stats {
+    fn check(&self) -> Check {
+        if self.successes > self.trials {
+            return Err(("stats.successes", "more successes than trials".into()));
+        }
+        finite("stats.s", self.s)?;
+        finite_opt("stats.mx", self.mx)?;
+        finite_opt("stats.my", self.my)?;
+        finite_opt("stats.ex", self.ex)?;
+        finite_opt("stats.ey", self.ey)?;
+        finite("stats.mx_all", self.mx_all)?;
+        finite("stats.my_all", self.my_all)
+    }
+}
+
+/// The best result so far, ν′ and its parameter set (Optim.1).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Best {
+    /// Iteration where it was found.
+    pub iteration: u64,
+    /// Its parameter set (optimised parameters, external units).
+    pub params: Vec<(String, f64)>,
+    /// Its statistics.
+    pub stats: Stats,
+}
+
+/// An iteration's decision, published on the results topic.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IterationResult {
+    /// Run name.
+    pub run: String,
+    /// Iteration index.
+    pub iteration: u64,
+    /// Its parameter set (optimised parameters, external units).
+    pub params: Vec<(String, f64)>,
+    /// Its statistics.
+    pub stats: Stats,
+    /// pickOut's decision.
+    pub decision: Decision,
+    /// ν′ after this decision.
+    pub best: Option<Best>,
+}
+
+impl WireMessage for IterationResult {
+    const NAME: &'static str = "IterationResult";
+    const KIND: u8 = 3;
+    fn validate(&self) -> Check {
+        chunk("run", &self.run)?;
+        param_list("params", &self.params)?;
+        self.stats.check()?;
+        if let Some(b) = &self.best {
+            param_list("best.params", &b.params)?;
+            b.stats.check()?;
+        }
+        Ok(())
+    }
+}
+
+/// A worker's announcement: who it is and how many trials it can take.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WorkerPresence {
+    /// Worker id (a UUID).
+    pub worker: String,
+    /// Trials it runs at once.
+    pub slots: u32,
+    /// Trials it is running now.
+    pub busy: u32,
+    /// naofarm version of the worker.
+    pub version: String,
+}
+
+impl WireMessage for WorkerPresence {
+    const NAME: &'static str = "WorkerPresence";
+    const KIND: u8 = 4;
+    fn validate(&self) -> Check {
+        chunk("worker", &self.worker)?;
+        if self.slots == 0 || self.slots > 4096 {
+            return Err(("slots", format!("{} is not in 1..=4096", self.slots)));
+        }
+        if self.busy > self.slots {
+            return Err(("busy", "more busy slots than slots".into()));
+        }
+        if self.version.len() > 64 {
+            return Err(("version", "longer than 64 bytes".into()));
+        }
+        Ok(())
+    }
+}
+
+/// A run's state, for late joiners and watchers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunStatus {
+    /// Run name.
+    pub run: String,
+    /// Iterations planned.
+    pub planned: u64,
+    /// Iterations opened so far (the current iteration is `opened - 1`).
+    pub opened: u64,
+    /// Iterations decided so far.
+    pub decided: u64,
+    /// ACCEPT count.
+    pub accepts: u64,
+    /// EQUIVALENT count.
+    pub equivalents: u64,
+    /// REJECT count.
+    pub rejects: u64,
+    /// ν′ and its parameters (Optim.1).
+    pub best: Option<Best>,
+    /// CLOP's mean recommendation (Optim.2), external units.
+    pub optim2: Vec<(String, f64)>,
+    /// Workers currently alive.
+    pub workers: u32,
+    /// Trials completed per wall-clock second, recent average.
+    pub trials_per_s: f64,
+    /// Whether every planned iteration is decided.
+    pub finished: bool,
+}
+
+impl WireMessage for RunStatus {
+    const NAME: &'static str = "RunStatus";
+    const KIND: u8 = 5;
+    fn validate(&self) -> Check {
+        chunk("run", &self.run)?;
+        if self.decided > self.opened {
+            return Err(("decided", "more decided than opened".into()));
+        }
+        if self.accepts + self.equivalents + self.rejects != self.decided {
+            return Err(("accepts", "decision counts do not add up to decided".into()));
+        }
+        param_list("optim2", &self.optim2)?;
+        if let Some(b) = &self.best {
+            param_list("best.params", &b.params)?;
+            b.stats.check()?;
+        }
+        finite("trials_per_s", self.trials_per_s)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn stats() -> impl Strategy<Value = Stats> {
+        (0u32..20, any::<bool>(), -5.0f64..5.0, 0.0f64..1.0).prop_map(|(n, some, x, e)| Stats {
+            trials: n + 1,
+            successes: n / 2,
+            s: f64::from(n / 2) / f64::from(n + 1),
+            mx: some.then_some(x),
+            my: some.then_some(x.abs()),
+            ex: some.then_some(e),
+            ey: None,
+            mx_all: x,
+            my_all: x.abs(),
+        })
+    }
+
+    fn params() -> impl Strategy<Value = Vec<(String, f64)>> {
+        proptest::collection::vec((0usize..5, 0.0f64..1.0), 0..5).prop_map(|v| {
+            v.into_iter()
+                .map(|(i, t)| {
+                    let p = &crate::params::KNOWN[i];
+                    (p.name.to_string(), p.min + t * (p.max - p.min))
+                })
+                .collect()
+        })
+    }
+
+    fn run() -> impl Strategy<Value = String> {
+        "[a-z0-9_-]{1,20}"
+    }
+
+    proptest! {
+        #[test]
+        fn trial_request_round_trips(run in run(), i in any::<u64>(), k in any::<u32>(), seed in any::<u64>(),
+                                     d in 0.1f64..100.0, ps in params(), t in 0u8..5, disp in any::<u64>()) {
+            let m = TrialRequest { run, iteration: i, trial: k, seed, model: TrialModel::Synthetic,
+                                   robot_type: t, duration_s: d, params: ps, dispatch: disp };
+            prop_assert_eq!(TrialRequest::decode(&m.encode()), Ok(m));
+        }
+
+        #[test]
+        fn trial_outcome_round_trips(run in run(), i in any::<u64>(), k in any::<u32>(), fell in any::<bool>(),
+                                     x in -100.0f64..100.0, y in -100.0f64..100.0, t in 0.0f64..10.0) {
+            let m = TrialOutcome { run, iteration: i, trial: k, seed: 7, dispatch: 1, worker: "w".into(), fell,
+                                   x_m: x, y_m: y, fall_time_s: fell.then_some(t), sim_time_s: t, wall_time_s: 0.5 };
+            prop_assert_eq!(TrialOutcome::decode(&m.encode()), Ok(m));
+        }
+
+        #[test]
+        fn iteration_result_round_trips(run in run(), i in any::<u64>(), ps in params(), st in stats(), best in any::<bool>()) {
+            let m = IterationResult { run, iteration: i, params: ps.clone(), stats: st.clone(), decision: Decision::Equivalent,
+                                      best: best.then_some(Best { iteration: i, params: ps, stats: st }) };
+            prop_assert_eq!(IterationResult::decode(&m.encode()), Ok(m.clone()));
+            prop_assert_eq!(IterationResult::from_json(&m.to_json()), Ok(m));
+        }
+
+        #[test]
+        fn presence_and_status_round_trip(w in run(), slots in 1u32..64, a in 0u64..100, e in 0u64..100, r in 0u64..100, ps in params()) {
+            let p = WorkerPresence { worker: w.clone(), slots, busy: slots / 2, version: "0.1.0".into() };
+            prop_assert_eq!(WorkerPresence::decode(&p.encode()), Ok(p));
+            let s = RunStatus { run: w, planned: 500, opened: a + e + r + 2, decided: a + e + r, accepts: a,
+                                equivalents: e, rejects: r, best: None, optim2: ps, workers: 3, trials_per_s: 1.5, finished: false };
+            prop_assert_eq!(RunStatus::decode(&s.encode()), Ok(s.clone()));
+            prop_assert_eq!(RunStatus::from_json(&s.to_json()), Ok(s));
+        }
+
+        #[test]
+        fn arbitrary_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..512)) {
+            let _ = TrialRequest::decode(&bytes);
+            let _ = TrialOutcome::decode(&bytes);
+            let _ = IterationResult::decode(&bytes);
+            let _ = WorkerPresence::decode(&bytes);
+            let _ = RunStatus::decode(&bytes);
+        }
+
+        #[test]
+        fn arbitrary_bodies_behind_a_valid_header_never_panic(kind in 1u8..6, body in proptest::collection::vec(any::<u8>(), 0..256)) {
+            let mut bytes = vec![b'N', b'F', WIRE_VERSION, kind];
+            bytes.extend(body);
+            let _ = TrialRequest::decode(&bytes);
+            let _ = TrialOutcome::decode(&bytes);
+            let _ = IterationResult::decode(&bytes);
+            let _ = WorkerPresence::decode(&bytes);
+            let _ = RunStatus::decode(&bytes);
+        }
+    }
+
+    fn outcome() -> TrialOutcome {
+        TrialOutcome {
+            run: "r".into(),
+            iteration: 1,
+            trial: 2,
+            seed: 3,
+            dispatch: 4,
+            worker: "w".into(),
+            fell: false,
+            x_m: 1.0,
+            y_m: 0.1,
+            fall_time_s: None,
+            sim_time_s: 10.0,
+            wall_time_s: 0.1,
+        }
+    }
+
+    #[test]
+    fn rejects_trailing_bytes_version_kind_and_nan() {
+        let mut b = outcome().encode();
+        b.push(0);
+        assert!(matches!(
+            TrialOutcome::decode(&b),
+            Err(DecodeError::Trailing { extra: 1, .. })
+        ));
+        let mut b = outcome().encode();
+        b[2] = 9;
+        assert!(matches!(
+            TrialOutcome::decode(&b),
+            Err(DecodeError::Version { found: 9, .. })
+        ));
+        let b = outcome().encode();
+        assert!(matches!(
+            TrialRequest::decode(&b),
+            Err(DecodeError::WrongKind { .. })
+        ));
+        let mut o = outcome();
+        o.x_m = f64::NAN;
+        let e = TrialOutcome::decode(&o.encode()).unwrap_err().to_string();
+        assert!(e.contains("TrialOutcome") && e.contains("x_m"), "{e}");
+        let huge = vec![0u8; MAX_MESSAGE_BYTES + 1];
+        assert!(matches!(
+            TrialOutcome::decode(&huge),
+            Err(DecodeError::TooLarge { .. })
+        ));
+    }
+
+    #[test]
+    fn a_huge_length_prefix_does_not_allocate() {
+        // A string length of u64::MAX must be refused by the limit, not attempted.
+        let mut b = vec![b'N', b'F', WIRE_VERSION, TrialOutcome::KIND, 0xff];
+        b.extend_from_slice(&u64::MAX.to_le_bytes());
+        assert!(matches!(
+            TrialOutcome::decode(&b),
+            Err(DecodeError::Body { .. })
+        ));
+    }
+
+    #[test]
+    fn request_outside_admissible_range_is_refused() {
+        let r = TrialRequest {
+            run: "r".into(),
+            iteration: 0,
+            trial: 0,
+            seed: 0,
+            model: TrialModel::Nao,
+            robot_type: 0,
+            duration_s: 10.0,
+            params: vec![("ThighRelHip2_Z".into(), 0.5)],
+            dispatch: 0,
+        };
+        let e = TrialRequest::decode(&r.encode()).unwrap_err().to_string();
+        assert!(e.contains("ThighRelHip2_Z"), "{e}");
+    }
+}

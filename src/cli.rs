@@ -1,0 +1,183 @@
+//! Argument definitions and dispatch to the crates.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::{Parser, Subcommand};
+use protocol::Experiment;
+
+use crate::net::NetArgs;
+
+/// Exit-code classes: 2 for usage or configuration errors, 1 for a failed job.
+pub enum Failure {
+    /// Bad arguments, a bad file: exit 2.
+    Usage(anyhow::Error),
+    /// The job itself failed: exit 1.
+    Job(anyhow::Error),
+}
+
+/// A distributed trial farm that co-evolves a simulated NAO's body and walk.
+#[derive(Parser)]
+#[command(name = "naofarm", version, about)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// All in one: a coordinator and local workers over zenoh on loopback.
+    Run {
+        #[command(flatten)]
+        job: JobArgs,
+        /// Local workers to start (each with one slot); default: one per core.
+        #[arg(long)]
+        workers: Option<u32>,
+        /// Print one JSON line per decided iteration instead of the progress view.
+        #[arg(long)]
+        json: bool,
+    },
+    /// The coordinator alone (cluster use): owns the run, its journal and dispatch.
+    Coordinator {
+        #[command(flatten)]
+        job: JobArgs,
+        #[command(flatten)]
+        net: NetArgs,
+        /// Print one JSON line per decided iteration.
+        #[arg(long)]
+        json: bool,
+    },
+    /// A stateless worker (cluster use): runs trials for any coordinator it reaches.
+    Worker {
+        #[command(flatten)]
+        net: NetArgs,
+        /// Trials run at once (default: cores).
+        #[arg(long)]
+        slots: Option<u32>,
+        /// Minimum wall time per trial in ms (paces the synthetic model for farm tests and benchmarks).
+        #[arg(long, default_value_t = 0)]
+        min_trial_ms: u64,
+    },
+    /// Benchmarks: `bench clop` (regret and cost).
+    #[command(subcommand)]
+    Bench(BenchCommand),
+    /// Validate an experiment file and print it as parsed.
+    Check {
+        /// The experiment file (TOML).
+        experiment: PathBuf,
+        /// Print the parsed experiment as JSON.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// Runs the chosen subcommand.
+pub fn dispatch(cli: Cli) -> Result<(), Failure> {
+    match cli.command {
+        Command::Check { experiment, json } => check(&experiment, json),
+        Command::Run { job, workers, json } => crate::farm::run(&job, workers, json),
+        Command::Coordinator { job, net, json } => crate::farm::coordinator(&job, &net, json),
+        Command::Worker {
+            net,
+            slots,
+            min_trial_ms,
+        } => crate::farm::worker(&net, slots, min_trial_ms),
+        Command::Bench(b) => crate::benches::bench(b),
+    }
+}
+
+/// What `run` and `coordinator` share: the experiment, the run directory, overrides.
+#[derive(clap::Args, Debug, Clone)]
+pub struct JobArgs {
+    /// The experiment file (TOML).
+    pub experiment: PathBuf,
+    /// The run directory (journal); an existing one is resumed.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Override the number of iterations.
+    #[arg(long)]
+    pub iterations: Option<u64>,
+    /// Override the seed.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Override the trial model (`nao` or `synthetic`).
+    #[arg(long)]
+    pub model: Option<String>,
+    /// Start from an earlier run's history (its run directory).
+    #[arg(long)]
+    pub from: Option<PathBuf>,
+    /// Seconds a worker may hold a trial before it is given to another.
+    #[arg(long, default_value_t = 120.0)]
+    pub lease_s: f64,
+}
+
+/// Benchmarks.
+#[derive(Subcommand, Debug)]
+pub enum BenchCommand {
+    /// CLOP: simple regret on the test problems beside baselines, and cost per step.
+    Clop(crate::benches::ClopBenchArgs),
+}
+
+/// Reads and validates an experiment file (a usage error when it is bad).
+pub fn load_experiment(path: &Path) -> Result<(Experiment, String), Failure> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read {}", path.display()))
+        .map_err(Failure::Usage)?;
+    let e = Experiment::from_toml(&text)
+        .with_context(|| format!("{}", path.display()))
+        .map_err(Failure::Usage)?;
+    Ok((e, text))
+}
+
+fn check(path: &Path, json: bool) -> Result<(), Failure> {
+    let (e, _) = load_experiment(path)?;
+    if json {
+        let text = serde_json::to_string_pretty(&e)
+            .context("encode JSON")
+            .map_err(Failure::Job)?;
+        println!("{text}");
+        return Ok(());
+    }
+    println!(
+        "experiment `{}` (seed {}, model {:?}, robot type {}, start {:?})",
+        e.name, e.seed, e.model, e.robot_type, e.start
+    );
+    println!(
+        "  {} iterations x {} trials of {} s, pipeline depth {}",
+        e.iterations, e.trials_per_iteration, e.trial_duration_s, e.pipeline_depth
+    );
+    println!("  parameters (L):");
+    for p in &e.parameter {
+        println!(
+            "    {:<36} {:<8} [{}, {}]  expert {}",
+            p.name,
+            format!("{:?}", p.kind).to_lowercase(),
+            p.lower,
+            p.upper,
+            p.expert_value()
+        );
+    }
+    if !e.fixed.is_empty() {
+        println!("  fixed:");
+        for (k, v) in &e.fixed {
+            println!("    {k:<36} {v}");
+        }
+    }
+    let k = &e.pickout;
+    println!(
+        "  pickOut: SUCCESS_RATE {} XY_RATIO {} alpha {} beta {} gamma {}",
+        k.success_rate, k.xy_ratio, k.alpha, k.beta, k.gamma
+    );
+    let c = &e.clop;
+    println!(
+        "  CLOP: H {} DrawElo {} correlations {} prior {} refresh {} max weight iterations {} nMCMC {}",
+        c.h,
+        c.draw_elo,
+        if c.correlations { "all" } else { "none" },
+        c.prior_strength,
+        c.refresh_rate,
+        c.max_weight_iterations,
+        c.n_mcmc
+    );
+    Ok(())
+}

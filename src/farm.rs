@@ -1,0 +1,288 @@
+//! Wiring of `run`, `coordinator` and `worker`: parse, open sessions, call
+//! the services, turn signals into the shutdown channel.
+
+use std::time::Duration;
+
+use anyhow::{anyhow, Context};
+use coordinator::{
+    run::{load_history, Run},
+    service::{self, Ended, Event, ServiceConfig},
+};
+use protocol::{experiment::TrialModel, wire::WireMessage};
+
+use crate::{
+    cli::{load_experiment, Failure, JobArgs},
+    net::{free_loopback_port, NetArgs},
+};
+
+fn runtime() -> Result<tokio::runtime::Runtime, Failure> {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .map_err(|e| Failure::Job(e.into()))
+}
+
+/// A shutdown channel that turns true on SIGINT or SIGTERM.
+fn signals() -> tokio::sync::watch::Receiver<bool> {
+    let (tx, rx) = tokio::sync::watch::channel(false);
+    tokio::spawn(async move {
+        let ctrl_c = tokio::signal::ctrl_c();
+        #[cfg(unix)]
+        {
+            let mut term =
+                match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+                    Ok(t) => t,
+                    Err(_) => {
+                        let _ = ctrl_c.await;
+                        let _ = tx.send(true);
+                        return;
+                    }
+                };
+            tokio::select! {
+                _ = ctrl_c => {}
+                _ = term.recv() => {}
+            }
+        }
+        #[cfg(not(unix))]
+        let _ = ctrl_c.await;
+        let _ = tx.send(true);
+    });
+    rx
+}
+
+fn open_run(job: &JobArgs) -> Result<(Run, Vec<coordinator::run::Effect>), Failure> {
+    let (mut exp, text) = load_experiment(&job.experiment)?;
+    if let Some(n) = job.iterations {
+        exp.iterations = n;
+    }
+    if let Some(s) = job.seed {
+        exp.seed = s;
+    }
+    if let Some(m) = &job.model {
+        exp.model = TrialModel::parse(m).map_err(|e| Failure::Usage(anyhow!("--model: {e}")))?;
+    }
+    exp.validate().map_err(|e| Failure::Usage(e.into()))?;
+    if !(job.lease_s.is_finite() && job.lease_s > 0.0) {
+        return Err(Failure::Usage(anyhow!(
+            "--lease-s must be a positive number of seconds"
+        )));
+    }
+    let imported = match &job.from {
+        Some(dir) => Some(
+            load_history(dir)
+                .with_context(|| format!("--from {}", dir.display()))
+                .map_err(Failure::Usage)?,
+        ),
+        None => None,
+    };
+    Run::open(&job.out, exp, &text, imported).map_err(|e| match e {
+        coordinator::run::RunError::OtherExperiment { .. }
+        | coordinator::run::RunError::Diverged { .. } => Failure::Usage(e.into()),
+        e => Failure::Job(e.into()),
+    })
+}
+
+fn service_config(job: &JobArgs, prefix: &str) -> ServiceConfig {
+    ServiceConfig {
+        prefix: prefix.to_string(),
+        lease: Duration::from_secs_f64(job.lease_s),
+        ..ServiceConfig::default()
+    }
+}
+
+fn print_event(e: &Event, json: bool) {
+    let Event::Decided(d, status) = e;
+    if json {
+        let line = serde_json::json!({
+            "event": "decided",
+            "iteration": d.iteration,
+            "decision": d.decision,
+            "params": d.params,
+            "s": d.stats.s,
+            "mx": d.stats.mx,
+            "my": d.stats.my,
+            "ex": d.stats.ex,
+            "status": serde_json::from_str::<serde_json::Value>(&status.to_json()).unwrap_or_default(),
+        });
+        println!("{line}");
+    } else {
+        let f = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3}"));
+        println!(
+            "[{}/{}] iteration {:>4} {:<10} s {:.2} mx {} my {} ex {}  (A {} E {} R {}, {:.1} trials/s)",
+            status.decided,
+            status.planned,
+            d.iteration,
+            format!("{:?}", d.decision).to_uppercase(),
+            d.stats.s,
+            f(d.stats.mx),
+            f(d.stats.my),
+            f(d.stats.ex),
+            status.accepts,
+            status.equivalents,
+            status.rejects,
+            status.trials_per_s
+        );
+    }
+}
+
+fn summary(run_dir: &std::path::Path, ended: &Ended) -> Result<(), Failure> {
+    match ended {
+        Ended::Finished(c) => {
+            eprintln!(
+                "run complete: {} outcomes journaled, {} duplicates ignored, {} refused, {} re-dispatched; journal in {}",
+                c.accepted,
+                c.duplicates,
+                c.refused,
+                c.redispatched,
+                run_dir.display()
+            );
+            Ok(())
+        }
+        Ended::Interrupted(_) => Err(Failure::Job(anyhow!(
+            "interrupted; resume with the same command (journal in {})",
+            run_dir.display()
+        ))),
+    }
+}
+
+/// `naofarm coordinator`.
+pub fn coordinator(job: &JobArgs, net: &NetArgs, json: bool) -> Result<(), Failure> {
+    let cfg = net
+        .zenoh_config(&["tcp/127.0.0.1:7447"])
+        .map_err(Failure::Usage)?;
+    let (run, effects) = open_run(job)?;
+    let rt = runtime()?;
+    rt.block_on(async {
+        let session = zenoh::open(cfg)
+            .await
+            .map_err(|e| Failure::Job(anyhow!("zenoh: {e}")))?;
+        let shutdown = signals();
+        let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel();
+        let printer = tokio::spawn(async move {
+            while let Some(e) = rx.recv().await {
+                print_event(&e, json);
+            }
+        });
+        let ended = service::serve(
+            session.clone(),
+            run,
+            effects,
+            service_config(job, &net.prefix),
+            shutdown,
+            Some(tx),
+        )
+        .await
+        .map_err(|e| Failure::Job(e.into()))?;
+        let _ = printer.await;
+        let _ = session.close().await;
+        summary(&job.out, &ended)
+    })
+}
+
+/// `naofarm worker`.
+pub fn worker(net: &NetArgs, slots: Option<u32>, min_trial_ms: u64) -> Result<(), Failure> {
+    let cfg = net.zenoh_config(&[]).map_err(Failure::Usage)?;
+    let mut wcfg = worker::service::WorkerConfig {
+        prefix: net.prefix.clone(),
+        min_trial: Duration::from_millis(min_trial_ms),
+        ..worker::service::WorkerConfig::default()
+    };
+    if let Some(s) = slots {
+        if s == 0 || s > 4096 {
+            return Err(Failure::Usage(anyhow!("--slots must be in 1..=4096")));
+        }
+        wcfg.slots = s;
+    }
+    let rt = runtime()?;
+    rt.block_on(async {
+        let session = zenoh::open(cfg)
+            .await
+            .map_err(|e| Failure::Job(anyhow!("zenoh: {e}")))?;
+        let shutdown = signals();
+        let s = worker::service::serve(session.clone(), wcfg, shutdown)
+            .await
+            .map_err(|e| Failure::Job(e.into()))?;
+        let _ = session.close().await;
+        eprintln!(
+            "worker stopped: {} trials run, {} refused",
+            s.trials, s.refused
+        );
+        Ok(())
+    })
+}
+
+/// `naofarm run`: coordinator and local workers in one process, over zenoh on loopback.
+pub fn run(job: &JobArgs, workers: Option<u32>, json: bool) -> Result<(), Failure> {
+    let n = workers.unwrap_or_else(|| {
+        std::thread::available_parallelism()
+            .ok()
+            .and_then(|n| u32::try_from(n.get()).ok())
+            .unwrap_or(1)
+    });
+    if n == 0 {
+        return Err(Failure::Usage(anyhow!("--workers must be at least 1")));
+    }
+    let port = free_loopback_port().map_err(Failure::Job)?;
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let coord_net = NetArgs {
+        listen: vec![endpoint.clone()],
+        ..NetArgs::default()
+    };
+    let worker_net = NetArgs {
+        connect: vec![endpoint],
+        ..NetArgs::default()
+    };
+    let ccfg = coord_net.zenoh_config(&[]).map_err(Failure::Job)?;
+    let (run, effects) = open_run(job)?;
+    let rt = runtime()?;
+    rt.block_on(async {
+        let session = zenoh::open(ccfg)
+            .await
+            .map_err(|e| Failure::Job(anyhow!("zenoh: {e}")))?;
+        let shutdown = signals();
+        let mut handles = Vec::new();
+        let mut worker_sessions = Vec::new();
+        for _ in 0..n {
+            let wcfg = worker_net.zenoh_config(&[]).map_err(Failure::Job)?;
+            let ws = zenoh::open(wcfg)
+                .await
+                .map_err(|e| Failure::Job(anyhow!("zenoh: {e}")))?;
+            worker_sessions.push(ws.clone());
+            let cfg = worker::service::WorkerConfig {
+                slots: 1,
+                ..worker::service::WorkerConfig::default()
+            };
+            handles.push(tokio::spawn(worker::service::serve(
+                ws,
+                cfg,
+                shutdown.clone(),
+            )));
+        }
+        let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel();
+        let printer = tokio::spawn(async move {
+            while let Some(e) = rx.recv().await {
+                print_event(&e, json);
+            }
+        });
+        let ended = service::serve(
+            session.clone(),
+            run,
+            effects,
+            service_config(job, protocol::keys::DEFAULT_PREFIX),
+            shutdown,
+            Some(tx),
+        )
+        .await;
+        let _ = printer.await;
+        for ws in &worker_sessions {
+            let _ = ws.close().await;
+        }
+        for h in handles {
+            h.abort();
+        }
+        let _ = session.close().await;
+        let ended = ended.map_err(|e| Failure::Job(e.into()))?;
+        summary(&job.out, &ended)
+    })
+}

@@ -1,0 +1,511 @@
+//! End-to-end tests: the `naofarm` binary as a real process.
+#![allow(clippy::unwrap_used)]
+
+use std::{path::PathBuf, process::Command};
+
+fn naofarm() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_naofarm"))
+}
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("naofarm-e2e-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn check_prints_the_five_parameters_with_the_papers_bounds() {
+    let out = naofarm()
+        .arg("check")
+        .arg(root().join("experiments/physical-technical.toml"))
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for (name, lo, hi) in [
+        ("ThighRelHip2_Z", "-0.08", "-0.03"),
+        ("ratio_flexion", "0.6", "0.95"),
+        ("long_offset_MidAnkles_2_Torso_Init", "0.001", "0.03"),
+        ("height_lift", "0.025", "0.07"),
+        ("xlength_step_max", "0.02", "0.15"),
+    ] {
+        let line = text
+            .lines()
+            .find(|l| l.contains(name))
+            .unwrap_or_else(|| panic!("{name} missing:\n{text}"));
+        assert!(line.contains(&format!("[{lo}, {hi}]")), "{line}");
+    }
+}
+
+#[test]
+fn check_json_is_machine_readable() {
+    let out = naofarm()
+        .args(["check", "--json"])
+        .arg(root().join("experiments/physical.toml"))
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["parameter"][0]["name"], "ThighRelHip2_Z");
+    assert_eq!(v["parameter"][0]["lower"], -0.10);
+}
+
+#[test]
+fn malformed_experiments_exit_2_naming_the_problem() {
+    let good = std::fs::read_to_string(root().join("experiments/physical-technical.toml")).unwrap();
+    let dir = scratch("check");
+    let cases = [
+        ("seed = 1", "seed = 1\nspeed = 3", "speed"),
+        ("lower = -0.08", "lower = -0.02", "parameter[0].lower"),
+        ("expert = 0.730", "expert = 0.99", "parameter[1].expert"),
+        ("beta = 1.0", "beta = 3.5", "pickout.beta"),
+        (
+            "trials_per_iteration = 10",
+            "trials_per_iteration = 0",
+            "trials_per_iteration",
+        ),
+        (
+            "name = \"height_lift\"",
+            "name = \"lift_height\"",
+            "unknown parameter `lift_height`",
+        ),
+        ("lower = 0.60", "lower = nan", "parameter[1].lower"),
+        ("seed = 1", "seed = ", "line"),
+    ];
+    for (i, (from, to, needle)) in cases.iter().enumerate() {
+        let text = good.replacen(from, to, 1);
+        assert_ne!(text, good, "{from}");
+        let path = dir.join(format!("bad{i}.toml"));
+        std::fs::write(&path, text).unwrap();
+        let out = naofarm().arg("check").arg(&path).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{to}: {err}");
+        assert!(err.contains(needle), "{to}: {err}");
+    }
+    let out = naofarm()
+        .arg("check")
+        .arg(dir.join("missing.toml"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}
+
+mod farm {
+    //! The farm as real processes over 127.0.0.1: a coordinator, workers, kills.
+
+    use std::{
+        io::{BufRead, BufReader},
+        path::{Path, PathBuf},
+        process::{Child, Stdio},
+        sync::mpsc,
+        time::{Duration, Instant},
+    };
+
+    use coordinator::{
+        evolve::DecidedIteration,
+        journal::{Journal, Record},
+    };
+
+    use super::{naofarm, scratch};
+
+    const TIMEOUT: Duration = Duration::from_secs(120);
+
+    fn experiment(dir: &Path, iterations: u64) -> PathBuf {
+        let text = format!(
+            r#"
+name = "farm"
+seed = 5
+iterations = {iterations}
+trials_per_iteration = 6
+pipeline_depth = 3
+model = "synthetic"
+start = "expert"
+
+[[parameter]]
+name = "ThighRelHip2_Z"
+lower = -0.08
+upper = -0.03
+expert = -0.04
+
+[[parameter]]
+name = "xlength_step_max"
+lower = 0.02
+upper = 0.15
+expert = 0.08
+
+[clop]
+draw_elo = 100.0
+n_mcmc = 100
+"#
+        );
+        let p = dir.join("exp.toml");
+        std::fs::write(&p, text).unwrap();
+        p
+    }
+
+    fn free_port() -> u16 {
+        std::net::TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port()
+    }
+
+    struct Coordinator {
+        child: Child,
+        lines: mpsc::Receiver<String>,
+        seen: Vec<String>,
+    }
+
+    impl Coordinator {
+        fn start(exp: &Path, out: &Path, port: u16, lease_s: f64) -> Self {
+            let mut child = naofarm()
+                .args(["coordinator", "--json", "--lease-s", &lease_s.to_string()])
+                .arg(exp)
+                .arg("--out")
+                .arg(out)
+                .args(["--listen", &format!("tcp/127.0.0.1:{port}")])
+                .stdout(Stdio::piped())
+                .stderr(std::fs::File::create(out.with_extension("stderr")).unwrap())
+                .spawn()
+                .unwrap();
+            let stdout = child.stdout.take().unwrap();
+            let (tx, lines) = mpsc::channel();
+            std::thread::spawn(move || {
+                for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                    if tx.send(line).is_err() {
+                        break;
+                    }
+                }
+            });
+            Self {
+                child,
+                lines,
+                seen: Vec::new(),
+            }
+        }
+
+        /// Waits until `n` iterations have been decided (by its JSON lines).
+        fn wait_decided(&mut self, n: usize) {
+            let deadline = Instant::now() + TIMEOUT;
+            while self.seen.len() < n {
+                let left = deadline.saturating_duration_since(Instant::now());
+                match self.lines.recv_timeout(left) {
+                    Ok(l) => self.seen.push(l),
+                    Err(e) => panic!("waiting for {n} decisions: {e}; saw {:?}", self.seen),
+                }
+            }
+        }
+
+        fn wait_exit(&mut self) -> std::process::ExitStatus {
+            let deadline = Instant::now() + TIMEOUT;
+            loop {
+                if let Some(s) = self.child.try_wait().unwrap() {
+                    while let Ok(l) = self.lines.recv_timeout(Duration::from_millis(200)) {
+                        self.seen.push(l);
+                    }
+                    return s;
+                }
+                assert!(
+                    Instant::now() < deadline,
+                    "coordinator did not finish; saw {:?}",
+                    self.seen
+                );
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        }
+    }
+
+    fn worker(port: u16, slots: u32, pace_ms: u64) -> Child {
+        naofarm()
+            .args(["worker", "--connect", &format!("tcp/127.0.0.1:{port}")])
+            .args([
+                "--slots",
+                &slots.to_string(),
+                "--min-trial-ms",
+                &pace_ms.to_string(),
+            ])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap()
+    }
+
+    fn journal(dir: &Path) -> Vec<Record> {
+        let (_, r) = Journal::open(dir).unwrap();
+        r.records
+    }
+
+    fn decided(records: &[Record]) -> Vec<DecidedIteration> {
+        records
+            .iter()
+            .filter_map(|r| {
+                if let Record::Decided(d) = r {
+                    Some(d.clone())
+                } else {
+                    None
+                }
+            })
+            .collect()
+    }
+
+    fn bits(h: &[DecidedIteration]) -> Vec<u64> {
+        let mut v = Vec::new();
+        for d in h {
+            v.push(d.iteration);
+            v.extend(d.params.iter().map(|x| x.to_bits()));
+            v.push(d.decision as u64);
+            v.extend(
+                [d.stats.mx, d.stats.my, d.stats.ex]
+                    .iter()
+                    .map(|x| x.map_or(u64::MAX, f64::to_bits)),
+            );
+        }
+        v
+    }
+
+    fn assert_every_trial_once(records: &[Record], iterations: u64) {
+        let mut seen = std::collections::BTreeSet::new();
+        for r in records {
+            if let Record::Outcome {
+                iteration, trial, ..
+            } = r
+            {
+                assert!(
+                    seen.insert((*iteration, *trial)),
+                    "trial {iteration}/{trial} journaled twice"
+                );
+            }
+        }
+        assert_eq!(seen.len() as u64, iterations * 6, "every trial journaled");
+    }
+
+    fn kill_all(children: &mut [Child]) {
+        for c in children.iter_mut() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+
+    fn signal(child: &Child, sig: &str) {
+        let ok = std::process::Command::new("kill")
+            .args([sig, &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(ok.success());
+    }
+
+    /// Runs a whole farm run with `n` workers; returns the run directory.
+    fn farm_run(name: &str, n: usize, iterations: u64) -> PathBuf {
+        let dir = scratch(name);
+        let exp = experiment(&dir, iterations);
+        let port = free_port();
+        let out = dir.join("run");
+        // Workers first: they keep trying to connect until the coordinator listens.
+        let mut ws: Vec<Child> = (0..n).map(|_| worker(port, 2, 15)).collect();
+        let mut c = Coordinator::start(&exp, &out, port, 30.0);
+        let status = c.wait_exit();
+        kill_all(&mut ws);
+        assert!(status.success(), "coordinator: {status}; {:?}", c.seen);
+        out
+    }
+
+    #[test]
+    fn three_workers_complete_a_run_with_every_trial_journaled_once() {
+        let out = farm_run("three", 3, 20);
+        let records = journal(&out);
+        assert_every_trial_once(&records, 20);
+        let workers: std::collections::BTreeSet<String> = records
+            .iter()
+            .filter_map(|r| {
+                if let Record::Outcome { result, .. } = r {
+                    Some(result.worker.clone())
+                } else {
+                    None
+                }
+            })
+            .collect();
+        assert!(
+            workers.len() >= 2,
+            "trials spread over workers: {workers:?}"
+        );
+    }
+
+    #[test]
+    fn one_worker_and_three_workers_give_bit_identical_histories() {
+        let one = decided(&journal(&farm_run("det1", 1, 15)));
+        let three = decided(&journal(&farm_run("det3", 3, 15)));
+        assert_eq!(one.len(), 15);
+        assert_eq!(bits(&one), bits(&three));
+    }
+
+    #[test]
+    fn a_killed_worker_loses_no_trial() {
+        let dir = scratch("sigkill");
+        let exp = experiment(&dir, 20);
+        let port = free_port();
+        let out = dir.join("run");
+        let mut c = Coordinator::start(&exp, &out, port, 30.0);
+        let mut ws: Vec<Child> = (0..3).map(|_| worker(port, 2, 20)).collect();
+        c.wait_decided(3);
+        ws[0].kill().unwrap();
+        let _ = ws[0].wait();
+        let status = c.wait_exit();
+        kill_all(&mut ws);
+        assert!(status.success(), "{:?}", c.seen);
+        assert_every_trial_once(&journal(&out), 20);
+    }
+
+    #[test]
+    fn a_frozen_worker_is_replaced_and_its_late_outcomes_ignored() {
+        let dir = scratch("sigstop");
+        let exp = experiment(&dir, 16);
+        let port = free_port();
+        let out = dir.join("run");
+        let mut c = Coordinator::start(&exp, &out, port, 2.0);
+        let mut ws: Vec<Child> = (0..3).map(|_| worker(port, 2, 20)).collect();
+        c.wait_decided(2);
+        signal(&ws[0], "-STOP");
+        c.wait_decided(8);
+        signal(&ws[0], "-CONT");
+        let status = c.wait_exit();
+        kill_all(&mut ws);
+        assert!(status.success(), "{:?}", c.seen);
+        assert_every_trial_once(&journal(&out), 16);
+    }
+
+    #[test]
+    fn a_killed_coordinator_resumes_to_the_same_history() {
+        let reference = decided(&journal(&farm_run("resume-ref", 2, 20)));
+        let dir = scratch("resume");
+        let exp = experiment(&dir, 20);
+        let port = free_port();
+        let out = dir.join("run");
+        let mut ws: Vec<Child> = (0..2).map(|_| worker(port, 2, 10)).collect();
+        let mut c = Coordinator::start(&exp, &out, port, 30.0);
+        c.wait_decided(5);
+        c.child.kill().unwrap();
+        let _ = c.child.wait();
+        let mut c = Coordinator::start(&exp, &out, port, 30.0);
+        let status = c.wait_exit();
+        kill_all(&mut ws);
+        assert!(status.success(), "{:?}", c.seen);
+        let records = journal(&out);
+        assert_every_trial_once(&records, 20);
+        assert_eq!(bits(&decided(&records)), bits(&reference));
+    }
+
+    #[test]
+    fn bad_messages_are_counted_and_change_nothing() {
+        use protocol::wire::{TrialOutcome, WireMessage};
+        use zenoh::Wait;
+        let dir = scratch("garbage");
+        let exp = experiment(&dir, 10);
+        let port = free_port();
+        let out = dir.join("run");
+        let mut c = Coordinator::start(&exp, &out, port, 30.0);
+        let mut ws: Vec<Child> = (0..2).map(|_| worker(port, 2, 30)).collect();
+        c.wait_decided(1);
+        let mut cfg = zenoh::Config::default();
+        cfg.insert_json5("scouting/multicast/enabled", "false")
+            .unwrap();
+        cfg.insert_json5("listen/endpoints", "[]").unwrap();
+        cfg.insert_json5("connect/endpoints", &format!("[\"tcp/127.0.0.1:{port}\"]"))
+            .unwrap();
+        let session = zenoh::open(cfg).wait().unwrap();
+        // Wait until the coordinator is reachable (its status answers): by then
+        // its subscriptions are known to this session and puts are routed.
+        let deadline = Instant::now() + TIMEOUT;
+        loop {
+            let replies = session
+                .get(protocol::keys::status("naofarm", "farm"))
+                .timeout(Duration::from_secs(2))
+                .wait()
+                .unwrap();
+            if replies.recv().is_ok() {
+                break;
+            }
+            assert!(Instant::now() < deadline, "coordinator never answered its status query");
+        }
+        let key = protocol::keys::outcomes("naofarm");
+        let good = TrialOutcome {
+            run: "farm".into(),
+            iteration: 1,
+            trial: 0,
+            seed: 0,
+            dispatch: 0,
+            worker: "intruder".into(),
+            fell: false,
+            x_m: 1.0,
+            y_m: 0.0,
+            fall_time_s: None,
+            sim_time_s: 10.0,
+            wall_time_s: 0.0,
+        };
+        let mut nan = good.encode();
+        // Same layout with x_m's bytes replaced by NaN: find 1.0f64 and swap it.
+        let one = 1.0f64.to_le_bytes();
+        if let Some(i) = nan.windows(8).position(|w| w == one) {
+            nan[i..i + 8].copy_from_slice(&f64::NAN.to_le_bytes());
+        }
+        let bad: Vec<Vec<u8>> = vec![
+            b"garbage".to_vec(),
+            vec![b'N', b'F', 99, 2, 1, 2, 3],
+            nan,
+            TrialOutcome {
+                run: "otherrun".into(),
+                ..good.clone()
+            }
+            .encode(),
+            TrialOutcome {
+                iteration: 999_999,
+                ..good.clone()
+            }
+            .encode(),
+            TrialOutcome {
+                trial: 77,
+                ..good.clone()
+            }
+            .encode(),
+            TrialOutcome {
+                seed: 12345,
+                ..good.clone()
+            }
+            .encode(),
+        ];
+        for b in &bad {
+            session.put(&key, b.clone()).wait().unwrap();
+        }
+        let status = c.wait_exit();
+        kill_all(&mut ws);
+        session.close().wait().unwrap();
+        assert!(status.success(), "{:?}", c.seen);
+        let records = journal(&out);
+        assert_every_trial_once(&records, 10);
+        let intruder = records
+            .iter()
+            .any(|r| matches!(r, Record::Outcome { result, .. } if result.worker == "intruder"));
+        assert!(
+            !intruder,
+            "nothing from the bad messages reached the journal"
+        );
+        let log = std::fs::read_to_string(out.with_extension("stderr")).unwrap();
+        let refused: u64 = log
+            .lines()
+            .find(|l| l.starts_with("run complete:"))
+            .and_then(|l| l.split(" refused").next())
+            .and_then(|s| s.rsplit(' ').next())
+            .and_then(|n| n.parse().ok())
+            .unwrap_or_else(|| panic!("no summary in {log}"));
+        assert!(refused >= bad.len() as u64, "{log}");
+    }
+}

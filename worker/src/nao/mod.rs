@@ -1,0 +1,3 @@
+//! The league's NAO rebuilt in rapier3d: the robot as data ([`model`]).
+
+pub mod model;
