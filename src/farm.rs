@@ -63,6 +63,12 @@ fn open_run(job: &JobArgs) -> Result<(Run, Vec<coordinator::run::Effect>), Failu
         exp.model = TrialModel::parse(m).map_err(|e| Failure::Usage(anyhow!("--model: {e}")))?;
     }
     exp.validate().map_err(|e| Failure::Usage(e.into()))?;
+    if exp.model == TrialModel::Nao {
+        return Err(Failure::Usage(anyhow!(
+            "model `nao`: the walking NAO trial (rapier3d rebuild + walk engine) is not in this build yet; \
+             run with --model synthetic, or an experiment with model = \"synthetic\""
+        )));
+    }
     if !(job.lease_s.is_finite() && job.lease_s > 0.0) {
         return Err(Failure::Usage(anyhow!(
             "--lease-s must be a positive number of seconds"
@@ -227,11 +233,14 @@ pub fn run(job: &JobArgs, workers: Option<u32>, json: bool) -> Result<(), Failur
     let endpoint = format!("tcp/127.0.0.1:{port}");
     let coord_net = NetArgs {
         listen: vec![endpoint.clone()],
+        prefix: protocol::keys::DEFAULT_PREFIX.to_string(),
         ..NetArgs::default()
     };
     let worker_net = NetArgs {
         connect: vec![endpoint],
-        ..NetArgs::default()
+        listen: vec![],
+        prefix: protocol::keys::DEFAULT_PREFIX.to_string(),
+        config: None,
     };
     let ccfg = coord_net.zenoh_config(&[]).map_err(Failure::Job)?;
     let (run, effects) = open_run(job)?;

@@ -434,7 +434,10 @@ n_mcmc = 100
             if replies.recv().is_ok() {
                 break;
             }
-            assert!(Instant::now() < deadline, "coordinator never answered its status query");
+            assert!(
+                Instant::now() < deadline,
+                "coordinator never answered its status query"
+            );
         }
         let key = protocol::keys::outcomes("naofarm");
         let good = TrialOutcome {
@@ -508,4 +511,29 @@ n_mcmc = 100
             .unwrap_or_else(|| panic!("no summary in {log}"));
         assert!(refused >= bad.len() as u64, "{log}");
     }
+}
+
+#[test]
+fn run_completes_a_synthetic_experiment_in_one_process() {
+    let dir = scratch("run");
+    let out = naofarm()
+        .args(["run", "--json", "--workers", "2", "--iterations", "8"])
+        .arg(root().join("experiments/synthetic.toml"))
+        .arg("--out")
+        .arg(dir.join("run"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let lines: Vec<serde_json::Value> = stdout
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 8);
+    assert_eq!(lines[7]["status"]["decided"], 8);
+    assert_eq!(lines[7]["status"]["finished"], true);
 }

@@ -762,7 +762,8 @@ mod tests {
             );
         }
         let bytes = bincode::serde::encode_to_vec(&c, bincode::config::standard()).unwrap();
-        let (back, _): (Clop, usize) = bincode::serde::decode_from_slice(&bytes, bincode::config::standard()).unwrap();
+        let (back, _): (Clop, usize) =
+            bincode::serde::decode_from_slice(&bytes, bincode::config::standard()).unwrap();
         assert_eq!(back, c);
     }
 
