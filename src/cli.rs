@@ -58,6 +58,18 @@ enum Command {
         #[arg(long, default_value_t = 0)]
         min_trial_ms: u64,
     },
+    /// Print the rebuilt robot: mass, segment lengths, hip-to-sole height, joint table.
+    Model {
+        /// League robot type 0–4.
+        #[arg(long = "type", default_value_t = 0)]
+        robot_type: u8,
+        /// Override a morphology quantity, NAME=VALUE (repeatable), e.g. ThighRelHip2_Z=-0.05.
+        #[arg(long = "param", value_name = "NAME=VALUE")]
+        params: Vec<String>,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
     /// Benchmarks: `bench clop` (regret and cost).
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -83,6 +95,11 @@ pub fn dispatch(cli: Cli) -> Result<(), Failure> {
             min_trial_ms,
         } => crate::farm::worker(&net, slots, min_trial_ms),
         Command::Bench(b) => crate::benches::bench(b),
+        Command::Model {
+            robot_type,
+            params,
+            json,
+        } => model(robot_type, &params, json),
     }
 }
 
@@ -179,5 +196,105 @@ fn check(path: &Path, json: bool) -> Result<(), Failure> {
         c.max_weight_iterations,
         c.n_mcmc
     );
+    Ok(())
+}
+
+fn parse_params(params: &[String]) -> Result<Vec<(String, f64)>, Failure> {
+    params
+        .iter()
+        .map(|p| {
+            let (name, value) = p.split_once('=').ok_or_else(|| {
+                Failure::Usage(anyhow::anyhow!("--param `{p}`: expected NAME=VALUE"))
+            })?;
+            let v: f64 = value.trim().parse().map_err(|_| {
+                Failure::Usage(anyhow::anyhow!("--param `{p}`: `{value}` is not a number"))
+            })?;
+            if !v.is_finite() {
+                return Err(Failure::Usage(anyhow::anyhow!(
+                    "--param `{p}`: not a finite number"
+                )));
+            }
+            Ok((name.trim().to_string(), v))
+        })
+        .collect()
+}
+
+fn model(robot_type: u8, params: &[String], json: bool) -> Result<(), Failure> {
+    use worker::nao::model::{Morphology, NaoModel};
+    let params = parse_params(params)?;
+    let mut m = Morphology::of_type(robot_type).map_err(|e| Failure::Usage(e.into()))?;
+    for (name, v) in &params {
+        m.set(name, *v).map_err(|e| Failure::Usage(e.into()))?;
+    }
+    let model = NaoModel::new(m).map_err(|e| Failure::Usage(e.into()))?;
+    let mo = &model.morphology;
+    if json {
+        let joints: Vec<serde_json::Value> = model
+            .joints
+            .iter()
+            .map(|j| {
+                serde_json::json!({
+                    "name": j.name,
+                    "parent": model.bodies[j.parent].name,
+                    "child": model.bodies[j.child].name,
+                    "anchor_m": j.anchor,
+                    "axis": j.axis,
+                    "lower_rad": j.limits_rad.0,
+                    "upper_rad": j.limits_rad.1,
+                    "max_speed_rad_s": j.max_speed_rad_s,
+                })
+            })
+            .collect();
+        let v = serde_json::json!({
+            "robot_type": mo.robot_type,
+            "total_mass_kg": model.total_mass_kg(),
+            "thigh_m": mo.thigh_m(),
+            "tibia_m": mo.tibia_m(),
+            "hip_to_sole_m": mo.hip_to_sole_m(),
+            "torso_to_sole_m": mo.torso_to_sole_m(),
+            "hip_width_m": mo.hip_width_m(),
+            "centre_of_mass_m": model.centre_of_mass(),
+            "morphology": mo,
+            "joints": joints,
+        });
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&v).map_err(|e| Failure::Job(e.into()))?
+        );
+        return Ok(());
+    }
+    println!(
+        "NAO type {} (frame: x forward, y left, z up; torso-centred, zero pose)",
+        mo.robot_type
+    );
+    println!("  total mass        {:.4} kg", model.total_mass_kg());
+    println!(
+        "  thigh / tibia     {:.5} / {:.5} m",
+        mo.thigh_m(),
+        mo.tibia_m()
+    );
+    println!("  hip to sole       {:.5} m", mo.hip_to_sole_m());
+    println!("  torso to sole     {:.5} m", mo.torso_to_sole_m());
+    println!("  hip width         {:.5} m", mo.hip_width_m());
+    let c = model.centre_of_mass();
+    println!(
+        "  centre of mass    ({:.4}, {:.4}, {:.4}) m",
+        c[0], c[1], c[2]
+    );
+    println!(
+        "  {:<6} {:<10} {:<10} {:>9} {:>9} {:>9}",
+        "joint", "parent", "child", "lower°", "upper°", "rad/s"
+    );
+    for j in &model.joints {
+        println!(
+            "  {:<6} {:<10} {:<10} {:>9.1} {:>9.1} {:>9.4}",
+            j.name,
+            model.bodies[j.parent].name,
+            model.bodies[j.child].name,
+            j.limits_rad.0.to_degrees(),
+            j.limits_rad.1.to_degrees(),
+            j.max_speed_rad_s
+        );
+    }
     Ok(())
 }

@@ -537,3 +537,37 @@ fn run_completes_a_synthetic_experiment_in_one_process() {
     assert_eq!(lines[7]["status"]["decided"], 8);
     assert_eq!(lines[7]["status"]["finished"], true);
 }
+
+#[test]
+fn model_prints_the_robot_and_refuses_an_impossible_thigh() {
+    let out = naofarm()
+        .args(["model", "--json", "--param", "ThighRelHip2_Z=-0.079"])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!((v["total_mass_kg"].as_f64().unwrap() - 4.6071).abs() < 1e-9);
+    assert!((v["hip_to_sole_m"].as_f64().unwrap() - 0.309).abs() < 1e-9);
+    let joints = v["joints"].as_array().unwrap();
+    assert_eq!(joints.len(), 22);
+    for f in ["name", "lower_rad", "upper_rad", "max_speed_rad_s"] {
+        assert!(joints.iter().all(|j| !j[f].is_null()), "{f}");
+    }
+    let out = naofarm()
+        .args(["model", "--param", "ThighRelHip2_Z=0.2"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("ThighRelHip2_Z") && err.contains("[-0.12, -0.005]"),
+        "{err}"
+    );
+    let out = naofarm()
+        .args(["model", "--param", "Bogus=1"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let out = naofarm().args(["model", "--type", "7"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}
