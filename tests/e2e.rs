@@ -412,9 +412,8 @@ n_mcmc = 100
         let exp = experiment(&dir, 10);
         let port = free_port();
         let out = dir.join("run");
+        // No worker yet: the coordinator cannot finish before the garbage is in.
         let mut c = Coordinator::start(&exp, &out, port, 30.0);
-        let mut ws: Vec<Child> = (0..2).map(|_| worker(port, 2, 30)).collect();
-        c.wait_decided(1);
         let mut cfg = zenoh::Config::default();
         cfg.insert_json5("scouting/multicast/enabled", "false")
             .unwrap();
@@ -488,6 +487,7 @@ n_mcmc = 100
         for b in &bad {
             session.put(&key, b.clone()).wait().unwrap();
         }
+        let mut ws: Vec<Child> = (0..2).map(|_| worker(port, 2, 5)).collect();
         let status = c.wait_exit();
         kill_all(&mut ws);
         session.close().wait().unwrap();
