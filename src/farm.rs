@@ -63,12 +63,6 @@ fn open_run(job: &JobArgs) -> Result<(Run, Vec<coordinator::run::Effect>), Failu
         exp.model = TrialModel::parse(m).map_err(|e| Failure::Usage(anyhow!("--model: {e}")))?;
     }
     exp.validate().map_err(|e| Failure::Usage(e.into()))?;
-    if exp.model == TrialModel::Nao {
-        return Err(Failure::Usage(anyhow!(
-            "model `nao`: the walking NAO trial (rapier3d rebuild + walk engine) is not in this build yet; \
-             run with --model synthetic, or an experiment with model = \"synthetic\""
-        )));
-    }
     if !(job.lease_s.is_finite() && job.lease_s > 0.0) {
         return Err(Failure::Usage(anyhow!(
             "--lease-s must be a positive number of seconds"

@@ -1,6 +1,8 @@
 //! The worker side of naofarm: trial models and the stateless zenoh worker service.
 //!
-//! Modules: [`synthetic`] (a cheap stand-in model for tests and farm benchmarks).
+//! Modules: [`nao`] (the league's NAO in rapier3d, its walk and trials),
+//! [`synthetic`] (a cheap stand-in model for tests and farm benchmarks),
+//! [`service`] (the zenoh worker).
 //! [`run_trial`] is the one trial interface, a pure function of the request.
 //!
 //! This crate must not keep state between trials or decide anything about
@@ -31,9 +33,6 @@ pub struct TrialRun {
 /// Why a trial could not run.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum TrialError {
-    /// The requested model is not available in this build.
-    #[error("trial model {0:?} is not available in this worker build")]
-    Unavailable(TrialModel),
     /// The parameters cannot build a robot.
     #[error("cannot build the robot: {0}")]
     Model(String),
@@ -43,6 +42,22 @@ pub enum TrialError {
 pub fn run_trial(req: &TrialRequest) -> Result<TrialRun, TrialError> {
     match req.model {
         TrialModel::Synthetic => Ok(synthetic::trial(&req.params, req.seed, req.duration_s)),
-        TrialModel::Nao => Err(TrialError::Unavailable(TrialModel::Nao)),
+        TrialModel::Nao => {
+            let t = nao::trial::run(
+                req.robot_type,
+                &req.params,
+                req.seed,
+                req.duration_s,
+                nao::sim::SimSettings::default(),
+            )
+            .map_err(|e| TrialError::Model(e.to_string()))?;
+            Ok(TrialRun {
+                fell: t.fell,
+                x_m: t.x,
+                y_m: t.y,
+                fall_time_s: t.fall_time_s,
+                sim_time_s: t.sim_time_s,
+            })
+        }
     }
 }

@@ -28,7 +28,7 @@ fn value(params: &[(String, f64)], name: &str) -> f64 {
         .unwrap_or(0.0)
 }
 
-fn gauss(rng: &mut ChaCha8Rng) -> f64 {
+pub(crate) fn gauss(rng: &mut ChaCha8Rng) -> f64 {
     // Box–Muller; one value per call keeps the stream simple.
     let u1: f64 = rng.random_range(f64::EPSILON..1.0);
     let u2: f64 = rng.random();

@@ -1,0 +1,865 @@
+//! The NAO of [`NaoModel`] as a rapier3d rigid-body simulation with contacts,
+//! driven like the league's server: a 20 ms agent cycle of joint velocity
+//! commands in, perceptions out.
+//!
+//! It must stay a pure function of (model, settings, start, commands): no
+//! clock, no global state, no randomness (noise belongs to the trial).
+//!
+//! # Decisions (`nao-model.md` §9), made once here
+//!
+//! 1. **Frame**: the project frame of [`super::model`] (x forward, y left,
+//!    z up); gravity −9.81 along z.
+//! 2. **Joint formulation: multibody (reduced coordinates).** Measured in
+//!    `rapier-notes.md` and again by `naofarm bench sim`: impulse joints could
+//!    not hold the chain of 0.07–0.125 kg mass-only links under a 1.2 kg torso
+//!    at any affordable step; multibody joints have no drift and stand with one
+//!    solver iteration.
+//! 3. **Time step**: [`SimSettings::substeps`] physics steps inside each
+//!    20 ms cycle (default 2 × 10 ms, one solver iteration with 12 inner PGS
+//!    iterations each); commands are held for the whole cycle, as SimSpark
+//!    holds them. Measured on the expert walk: one PGS iteration lets motors
+//!    and contacts fight (the robot sags and falls standing); 8–12 hold it;
+//!    extra *solver* iterations cost a mass-matrix update each and bought
+//!    nothing a higher PGS count did not. 2 × 10 ms followed the gait's plan
+//!    (1.75 of 1.75 m) better than 4 × 5 ms (1.6 m) at half the cost.
+//! 4. **Motors**: velocity-commanded hinge servos, the command clamped to the
+//!    joint's max speed, force-based rapier motor with zero stiffness and a
+//!    large damping (1000 N·m·s/rad, close to ODE's hard velocity constraint)
+//!    and at most 10 N·m.
+//! 5. **Limits**: rapier's multibody limit constraints at the spec's angles, no
+//!    bounce (ODE's restitution at stops is not reproduced: stops are rarely
+//!    hit by a walk and bounce would only add chatter).
+//! 6. **Friction**: Coulomb, coefficient 1.0 on feet and ground (average
+//!    rule), no force-dependent slip; trials may spread the ground value.
+//! 7. **Contact softness**: a 500 Hz contact spring, damping ratio 10
+//!    ([`SimSettings::contact_hz`]), nearer ODE's stiff ground (kp 2e5 N/m)
+//!    than rapier's default 30–60 Hz, with which the feet sank and the walk
+//!    made 0.3–1.2 m of its planned 1.75 m.
+//! 8. **Mass-only bodies**: every body's mass and inertia are set explicitly
+//!    from the model (colliders have zero density), so hip1/hip2/ankle/
+//!    shoulder/elbow weigh what the spec says.
+//! 9. **Self-collision**: none. Robot colliders only meet the ground
+//!    (collision groups) and jointed pairs have contacts disabled.
+//! 10. **Drag**: −0.01·v and −0.01·ω applied to every body as explicit forces
+//!     each physics step; rapier's own multibody joint damping is set to
+//!     [`SimSettings::joint_damping`] (default 0).
+//! 11. **Morphology**: the hetero parameters move joints only; boxes and masses
+//!     stay as the spec gives them (fidelity to SimSpark).
+//! 12. **Upper body**: with [`SimSettings::weld_upper_body`] (the trial
+//!     default) the head and arm joints are welded at their start angles, their
+//!     bodies merged into the torso with exact mass, inertia and colliders. A
+//!     walk holds them still anyway, and the multibody then has 18 instead of
+//!     28 degrees of freedom; the mass matrix — where the time goes — costs
+//!     about a quarter. `naofarm bench sim` measures both.
+//! 13. **Initial placement**: the soles start 0.5 mm above the ground in the
+//!     start posture, torso over the origin.
+//! 14. **Sensors**: SI units (rad, rad/s, m/s², N); gyro and accelerometer in
+//!     the torso frame, the accelerometer a finite difference over the cycle
+//!     that reads +9.81 along z at rest, as SimSpark's.
+//! 15. **Latency**: synchronous — a command computed from cycle t's
+//!     perception acts during t → t+1.
+//! 16. **Sleeping**: off for every robot body.
+//! 17. **Fall**: torso centre below 0.25 m or torso tilt beyond 45°
+//!     ([`fallen`]), the one definition for every trial.
+
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use rapier3d::prelude::*;
+use serde::Serialize;
+
+use super::kinematics::{self, Iso};
+use super::model::{NaoModel, Shape};
+
+/// The agent cycle, s.
+pub const CYCLE_S: f64 = 0.02;
+/// Most torque a servo can apply, N·m.
+pub const MAX_TORQUE_NM: f64 = 10.0;
+/// Below this torso-centre height the robot has fallen, m.
+pub const FALL_HEIGHT_M: f64 = 0.25;
+/// Beyond this torso tilt the robot has fallen, rad (45°).
+pub const FALL_TILT_RAD: f64 = std::f64::consts::FRAC_PI_4;
+/// The league agents' position servo gain: 0.15 rad/s per degree, in rad/s per rad.
+pub const SERVO_GAIN: f64 = 0.15 * 180.0 / std::f64::consts::PI;
+/// SimSpark's drag coefficient (force per velocity, torque per angular velocity).
+pub const DRAG: f64 = 0.01;
+const GRAVITY: f64 = 9.81;
+
+/// Physics settings of one simulation.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SimSettings {
+    /// Physics steps per 20 ms cycle.
+    pub substeps: u32,
+    /// Solver iterations per physics step (each recomputes the multibody's mass matrix).
+    pub solver_iterations: usize,
+    /// Inner PGS iterations per solver iteration (cheap: no mass-matrix update).
+    pub pgs_iterations: usize,
+    /// Coulomb friction of feet and ground.
+    pub friction: f64,
+    /// Contact spring natural frequency, Hz (damping ratio 10).
+    pub contact_hz: f64,
+    /// Weld head and arms to the torso at their start angles.
+    pub weld_upper_body: bool,
+    /// Motor damping (velocity constraint stiffness), N·m·s/rad.
+    pub motor_damping: f64,
+    /// Passive damping in every hinge, N·m·s/rad.
+    pub joint_damping: f64,
+}
+
+impl Default for SimSettings {
+    fn default() -> Self {
+        Self {
+            substeps: 2,
+            solver_iterations: 1,
+            pgs_iterations: 12,
+            friction: 1.0,
+            contact_hz: 500.0,
+            weld_upper_body: true,
+            motor_damping: 1000.0,
+            joint_damping: 0.0,
+        }
+    }
+}
+
+/// Why a simulation could not be built or continued.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SimError {
+    /// Wrong number of commands or angles.
+    #[error("expected {expected} joint values, got {got}")]
+    Arity {
+        /// Joints of the model.
+        expected: usize,
+        /// Values given.
+        got: usize,
+    },
+    /// A NaN or infinite command or start value.
+    #[error("joint value for `{0}` is not finite")]
+    NonFinite(String),
+    /// A settings value that cannot work.
+    #[error("bad simulation settings: {0}")]
+    Settings(String),
+    /// The physics went non-finite.
+    #[error("the simulation diverged at t = {0:.2} s")]
+    Diverged(f64),
+}
+
+/// How a simulation starts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Start {
+    /// Joint angles, one per model joint, rad (clamped into the limits).
+    pub angles: Vec<f64>,
+    /// Torso pitch (about y, + leans forward), rad.
+    pub pitch_rad: f64,
+    /// Torso roll (about x, + leans left... right-hand rule about x), rad.
+    pub roll_rad: f64,
+}
+
+impl Start {
+    /// Upright with these joint angles.
+    #[must_use]
+    pub fn upright(angles: Vec<f64>) -> Self {
+        Self {
+            angles,
+            pitch_rad: 0.0,
+            roll_rad: 0.0,
+        }
+    }
+}
+
+/// What the agent perceives after a cycle, plus the ground truth for metrics.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Perception {
+    /// Simulated time, s.
+    pub time_s: f64,
+    /// Hinge angles, one per model joint, rad.
+    pub joint_angles_rad: Vec<f64>,
+    /// Torso angular velocity in the torso frame, rad/s.
+    pub gyro_rad_s: [f64; 3],
+    /// Accelerometer in the torso frame, m/s² (+9.81 z at rest).
+    pub accel_m_s2: [f64; 3],
+    /// Contact force on the left and right foot (with toe), world frame, N.
+    pub foot_force_n: [[f64; 3]; 2],
+    /// Ground truth: torso centre, world frame, m.
+    pub torso_position_m: [f64; 3],
+    /// Ground truth: torso orientation quaternion (x, y, z, w).
+    pub torso_rotation: [f64; 4],
+    /// Ground truth: angle between the torso's z axis and the vertical, rad.
+    pub torso_tilt_rad: f64,
+}
+
+/// The fall rule for every trial: torso centre below 0.25 m or tilt beyond 45°.
+#[must_use]
+pub fn fallen(p: &Perception) -> bool {
+    p.torso_position_m[2] < FALL_HEIGHT_M || p.torso_tilt_rad > FALL_TILT_RAD
+}
+
+/// A motorised hinge in the multibody.
+#[derive(Debug, Clone, Copy)]
+struct Hinge {
+    handle: MultibodyJointHandle,
+    link: usize,
+    max_speed: f32,
+}
+
+/// Where a model body lives in the world.
+#[derive(Debug, Clone)]
+enum Place {
+    /// Its own rigid body.
+    Own(RigidBodyHandle),
+    /// Welded into the torso with this motion relative to the torso's.
+    Welded(Iso),
+}
+
+/// A running simulation of one robot.
+pub struct Sim {
+    world: PhysicsWorld,
+    model: NaoModel,
+    settings: SimSettings,
+    places: Vec<Place>,
+    hinges: Vec<Option<Hinge>>,
+    welded_angles: Vec<f64>,
+    torso: RigidBodyHandle,
+    root_joint: MultibodyJointHandle,
+    feet: [Vec<ColliderHandle>; 2],
+    ground: ColliderHandle,
+    own_bodies: Vec<RigidBodyHandle>,
+    cycle: u64,
+    prev_linvel: Vector3<f64>,
+    accel: Vector3<f64>,
+}
+
+fn v3(a: [f64; 3]) -> Vec3 {
+    Vec3::new(a[0] as f32, a[1] as f32, a[2] as f32)
+}
+
+fn to_pose(g: &Iso) -> Pose {
+    let t = g.translation.vector;
+    let q = g.rotation.quaternion();
+    Pose::from_parts(
+        Vec3::new(t.x as f32, t.y as f32, t.z as f32),
+        Rotation::from_xyzw(q.i as f32, q.j as f32, q.k as f32, q.w as f32),
+    )
+}
+
+fn from_pose(p: &Pose) -> Iso {
+    let t = p.translation;
+    let r = p.rotation;
+    Iso::from_parts(
+        nalgebra::Translation3::new(f64::from(t.x), f64::from(t.y), f64::from(t.z)),
+        UnitQuaternion::new_normalize(Quaternion::new(
+            f64::from(r.w),
+            f64::from(r.x),
+            f64::from(r.y),
+            f64::from(r.z),
+        )),
+    )
+}
+
+fn shape_collider(shape: Shape) -> ColliderBuilder {
+    match shape {
+        Shape::Box { half } => {
+            ColliderBuilder::cuboid(half[0] as f32, half[1] as f32, half[2] as f32)
+        }
+        Shape::Sphere { radius } => ColliderBuilder::ball(radius as f32),
+        Shape::Capsule {
+            radius,
+            half_length,
+        } => ColliderBuilder::capsule_z(half_length as f32, radius as f32),
+    }
+}
+
+/// Pose, in the torso body's frame, of a body welded with relative motion `rel`.
+fn welded_offset(rel: &Iso, centre: [f64; 3], torso_centre: [f64; 3]) -> Iso {
+    let c = rel * nalgebra::Point3::from(centre);
+    let t = nalgebra::Point3::from(torso_centre);
+    Iso::from_parts(nalgebra::Translation3::from(c - t), rel.rotation)
+}
+
+/// Whether a joint belongs to the head or the arms.
+#[must_use]
+pub fn is_upper_body_joint(name: &str) -> bool {
+    name.starts_with("he") || name.starts_with("lae") || name.starts_with("rae")
+}
+
+impl Sim {
+    /// Builds the world: ground, robot in the start posture with its soles just above
+    /// the ground, torso over the origin.
+    pub fn new(model: &NaoModel, settings: SimSettings, start: &Start) -> Result<Self, SimError> {
+        let n = model.joints.len();
+        if start.angles.len() != n {
+            return Err(SimError::Arity {
+                expected: n,
+                got: start.angles.len(),
+            });
+        }
+        for (j, a) in model.joints.iter().zip(&start.angles) {
+            if !a.is_finite() {
+                return Err(SimError::NonFinite(j.name.clone()));
+            }
+        }
+        if settings.substeps == 0
+            || settings.solver_iterations == 0
+            || settings.pgs_iterations == 0
+            || !(settings.friction.is_finite() && settings.friction >= 0.0)
+            || !(settings.contact_hz.is_finite() && settings.contact_hz > 0.0)
+            || !(settings.motor_damping.is_finite() && settings.motor_damping > 0.0)
+            || !(settings.joint_damping.is_finite() && settings.joint_damping >= 0.0)
+            || !(start.pitch_rad.is_finite() && start.roll_rad.is_finite())
+        {
+            return Err(SimError::Settings(format!("{settings:?}")));
+        }
+        let angles: Vec<f64> = model
+            .joints
+            .iter()
+            .zip(&start.angles)
+            .map(|(j, a)| a.clamp(j.limits_rad.0, j.limits_rad.1))
+            .collect();
+        let tilt = UnitQuaternion::from_euler_angles(start.roll_rad, start.pitch_rad, 0.0);
+        let mut root = Iso::from_parts(nalgebra::Translation3::identity(), tilt);
+        let motions = kinematics::body_motions(model, &angles, &root);
+        let low = kinematics::lowest_point(model, &motions);
+        root.translation.vector.z = -low + 0.0005;
+        let motions = kinematics::body_motions(model, &angles, &root);
+
+        let mut world = PhysicsWorld::new();
+        world.gravity = Vec3::new(0.0, 0.0, -GRAVITY as f32);
+        world.integration_parameters.dt = (CYCLE_S / f64::from(settings.substeps)) as f32;
+        world.integration_parameters.num_solver_iterations = settings.solver_iterations;
+        world.integration_parameters.num_internal_pgs_iterations = settings.pgs_iterations;
+        let contact = SpringCoefficients::new(settings.contact_hz as f32, 10.0);
+        world.integration_parameters.contact_softness = contact;
+        world.integration_parameters.static_contact_softness = contact;
+
+        let robot =
+            InteractionGroups::new(Group::GROUP_1, Group::GROUP_2, InteractionTestMode::And);
+        let ground_group =
+            InteractionGroups::new(Group::GROUP_2, Group::GROUP_1, InteractionTestMode::And);
+        let friction = settings.friction as f32;
+        let gbody =
+            world.insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(0.0, 0.0, -0.5)));
+        let ground = world.insert_collider(
+            ColliderBuilder::cuboid(100.0, 100.0, 0.5)
+                .friction(friction)
+                .collision_groups(ground_group),
+            Some(gbody),
+        );
+
+        let welded: Vec<bool> = {
+            let pj = kinematics::parent_joints(model);
+            pj.iter()
+                .map(|j| j.is_some_and(|j| is_upper_body_joint(&model.joints[j].name)))
+                .map(|up| up && settings.weld_upper_body)
+                .collect()
+        };
+        // Bodies.
+        let mut places = Vec::with_capacity(model.bodies.len());
+        let mut own_bodies = Vec::new();
+        let torso_motion = motions[0];
+        let mut torso_mass = MassProperties::default();
+        for (i, b) in model.bodies.iter().enumerate() {
+            let local = MassProperties::new(Vec3::ZERO, b.mass_kg as f32, v3(b.inertia));
+            if welded[i] {
+                let rel = torso_motion.inverse() * motions[i];
+                let offset = welded_offset(&rel, b.centre, model.bodies[0].centre);
+                torso_mass += local.transform_by(&to_pose(&offset));
+                places.push(Place::Welded(rel));
+                continue;
+            }
+            if i == 0 {
+                torso_mass += local;
+            }
+            let g = motions[i] * nalgebra::Translation3::from(Vector3::from(b.centre));
+            let handle = world.insert_body(
+                RigidBodyBuilder::dynamic()
+                    .pose(to_pose(&g))
+                    .can_sleep(false)
+                    .additional_mass_properties(if i == 0 {
+                        MassProperties::default()
+                    } else {
+                        local
+                    }),
+            );
+            own_bodies.push(handle);
+            places.push(Place::Own(handle));
+        }
+        let Place::Own(torso) = places[0] else {
+            return Err(SimError::Settings("the torso cannot be welded".into()));
+        };
+        world.bodies[torso].set_additional_mass_properties(torso_mass, false);
+        // Colliders.
+        let mut feet = [Vec::new(), Vec::new()];
+        for (i, b) in model.bodies.iter().enumerate() {
+            if !b.collider {
+                continue;
+            }
+            let (parent, offset) = match &places[i] {
+                Place::Own(h) => (*h, Pose::IDENTITY),
+                Place::Welded(rel) => (
+                    torso,
+                    to_pose(&welded_offset(rel, b.centre, model.bodies[0].centre)),
+                ),
+            };
+            let h = world.insert_collider(
+                shape_collider(b.shape)
+                    .position(offset)
+                    .density(0.0)
+                    .friction(friction)
+                    .collision_groups(robot),
+                Some(parent),
+            );
+            let side = if b.name.starts_with('l') { 0 } else { 1 };
+            if b.name.ends_with("foot") || b.name.ends_with("toe") {
+                feet[side].push(h);
+            }
+        }
+        // Joints (bodies inserted at their posed places: anchors are given in each
+        // body's own frame, which is the zero-pose frame carried along).
+        let mut hinges = vec![None; n];
+        let mut welded_angles = vec![0.0; n];
+        for (j, joint) in model.joints.iter().enumerate() {
+            welded_angles[j] = angles[j];
+            let (Place::Own(p), Place::Own(c)) = (&places[joint.parent], &places[joint.child])
+            else {
+                continue;
+            };
+            let pc = model.bodies[joint.parent].centre;
+            let cc = model.bodies[joint.child].centre;
+            let a = joint.anchor;
+            let builder = RevoluteJointBuilder::new(v3(joint.axis))
+                .local_anchor1(v3([a[0] - pc[0], a[1] - pc[1], a[2] - pc[2]]))
+                .local_anchor2(v3([a[0] - cc[0], a[1] - cc[1], a[2] - cc[2]]))
+                .limits([joint.limits_rad.0 as f32, joint.limits_rad.1 as f32])
+                .motor_model(MotorModel::ForceBased)
+                .motor_velocity(0.0, settings.motor_damping as f32)
+                .motor_max_force(MAX_TORQUE_NM as f32)
+                .contacts_enabled(false);
+            let handle = world
+                .multibody_joints
+                .insert(*p, *c, builder, true)
+                .ok_or_else(|| SimError::Settings(format!("joint {} closes a loop", joint.name)))?;
+            hinges[j] = Some(Hinge {
+                handle,
+                link: 0,
+                max_speed: joint.max_speed_rad_s as f32,
+            });
+        }
+        let Some(root_joint) = hinges.iter().flatten().next().map(|h: &Hinge| h.handle) else {
+            return Err(SimError::Settings("a robot without hinges".into()));
+        };
+        let mut sim = Self {
+            root_joint,
+            world,
+            model: model.clone(),
+            settings,
+            places,
+            hinges,
+            welded_angles,
+            torso,
+            feet,
+            ground,
+            own_bodies,
+            cycle: 0,
+            prev_linvel: Vector3::zeros(),
+            accel: Vector3::new(0.0, 0.0, GRAVITY),
+        };
+        let torso_pose =
+            motions[0] * nalgebra::Translation3::from(Vector3::from(model.bodies[0].centre));
+        sim.pose_multibody(&angles, &torso_pose)?;
+        Ok(sim)
+    }
+
+    /// Sets the multibody's generalised coordinates to the start pose and its
+    /// damping to the settings.
+    fn pose_multibody(&mut self, angles: &[f64], torso: &Iso) -> Result<(), SimError> {
+        // Link ids are known only once every joint is in.
+        for h in self.hinges.iter_mut().flatten() {
+            let (_, link) = self
+                .world
+                .multibody_joints
+                .get(h.handle)
+                .ok_or_else(|| SimError::Settings("lost a joint".into()))?;
+            h.link = link;
+        }
+        let (mb, _) = self
+            .world
+            .multibody_joints
+            .get_mut(self.root_joint)
+            .ok_or_else(|| SimError::Settings("lost a joint".into()))?;
+        let ndofs = mb.ndofs();
+        let mut disp = vec![0.0f32; ndofs];
+        // The root's free joint starts at the identity and the hinges at zero:
+        // displace both to the start pose.
+        let t = torso.translation.vector;
+        let r = torso.rotation.scaled_axis();
+        for (k, x) in [t.x, t.y, t.z, r.x, r.y, r.z].into_iter().enumerate() {
+            disp[k] = x as f32;
+        }
+        for (j, h) in self.hinges.iter().enumerate() {
+            if let Some(h) = h {
+                let Some(link) = mb.link(h.link) else {
+                    return Err(SimError::Settings("lost a link".into()));
+                };
+                disp[link.assembly_id()] = angles[j] as f32;
+            }
+        }
+        mb.apply_displacements(&disp);
+        for d in mb.damping_mut().iter_mut() {
+            *d = 0.0;
+        }
+        for h in self.hinges.iter().flatten() {
+            if let Some(link) = mb.link(h.link) {
+                let id = link.assembly_id();
+                mb.damping_mut()[id] = self.settings.joint_damping as f32;
+            }
+        }
+        mb.forward_kinematics(&self.world.bodies, false);
+        mb.update_rigid_bodies(&mut self.world.bodies, true);
+        Ok(())
+    }
+
+    /// The model simulated.
+    #[must_use]
+    pub fn model(&self) -> &NaoModel {
+        &self.model
+    }
+
+    /// The settings.
+    #[must_use]
+    pub fn settings(&self) -> &SimSettings {
+        &self.settings
+    }
+
+    /// Simulated time, s.
+    #[must_use]
+    pub fn time_s(&self) -> f64 {
+        self.cycle as f64 * CYCLE_S
+    }
+
+    /// Whether a joint is motorised (not welded).
+    #[must_use]
+    pub fn is_motorised(&self, joint: usize) -> bool {
+        self.hinges.get(joint).is_some_and(Option::is_some)
+    }
+
+    /// Current hinge angles, one per model joint (welded ones at their weld), rad.
+    #[must_use]
+    pub fn joint_angles(&self) -> Vec<f64> {
+        let mut out = self.welded_angles.clone();
+        let Some((mb, _)) = self.world.multibody_joints.get(self.root_joint) else {
+            return out;
+        };
+        for (j, h) in self.hinges.iter().enumerate() {
+            if let Some(link) = h.and_then(|h| mb.link(h.link)) {
+                out[j] = f64::from(link.joint().coords()[3]);
+            }
+        }
+        out
+    }
+
+    /// Runs one 20 ms cycle with these joint velocity commands (rad/s, one per
+    /// model joint; welded joints ignore theirs). Commands are clamped to the
+    /// joint's max speed.
+    pub fn step(&mut self, commands: &[f64]) -> Result<Perception, SimError> {
+        if commands.len() != self.model.joints.len() {
+            return Err(SimError::Arity {
+                expected: self.model.joints.len(),
+                got: commands.len(),
+            });
+        }
+        for (j, c) in self.model.joints.iter().zip(commands) {
+            if !c.is_finite() {
+                return Err(SimError::NonFinite(j.name.clone()));
+            }
+        }
+        let damping = self.settings.motor_damping as f32;
+        if let Some((mb, _)) = self.world.multibody_joints.get_mut(self.root_joint) {
+            for (h, c) in self.hinges.iter().zip(commands) {
+                let Some(h) = h else { continue };
+                let v = (*c as f32).clamp(-h.max_speed, h.max_speed);
+                if let Some(l) = mb.link_mut(h.link) {
+                    l.joint.data.set_motor_velocity(JointAxis::AngX, v, damping);
+                }
+            }
+        }
+        let drag = DRAG as f32;
+        for _ in 0..self.settings.substeps {
+            for h in &self.own_bodies {
+                let rb = &mut self.world.bodies[*h];
+                let (lv, av) = (rb.linvel(), rb.angvel());
+                rb.reset_forces(false);
+                rb.add_force(-drag * lv, false);
+                rb.add_torque(-drag * av, false);
+            }
+            self.world.step();
+        }
+        self.cycle += 1;
+        let rb = &self.world.bodies[self.torso];
+        let ok = self.world.quarantine().is_empty()
+            && rb.translation().is_finite()
+            && rb.linvel().is_finite();
+        if !ok {
+            return Err(SimError::Diverged(self.time_s()));
+        }
+        let lv = rb.linvel();
+        let lv = Vector3::new(f64::from(lv.x), f64::from(lv.y), f64::from(lv.z));
+        self.accel = (lv - self.prev_linvel) / CYCLE_S + Vector3::new(0.0, 0.0, GRAVITY);
+        self.prev_linvel = lv;
+        Ok(self.perceive())
+    }
+
+    /// The perception now (no noise).
+    #[must_use]
+    pub fn perceive(&self) -> Perception {
+        let rb = &self.world.bodies[self.torso];
+        let pose = from_pose(rb.position());
+        let inv = pose.rotation.inverse();
+        let av = rb.angvel();
+        let gyro = inv * Vector3::new(f64::from(av.x), f64::from(av.y), f64::from(av.z));
+        let accel = inv * self.accel;
+        let up = pose.rotation * Vector3::z();
+        let q = pose.rotation.quaternion();
+        let t = pose.translation.vector;
+        Perception {
+            time_s: self.time_s(),
+            joint_angles_rad: self.joint_angles(),
+            gyro_rad_s: [gyro.x, gyro.y, gyro.z],
+            accel_m_s2: [accel.x, accel.y, accel.z],
+            foot_force_n: [self.foot_force(0), self.foot_force(1)],
+            torso_position_m: [t.x, t.y, t.z],
+            torso_rotation: [q.i, q.j, q.k, q.w],
+            torso_tilt_rad: up.z.clamp(-1.0, 1.0).acos(),
+        }
+    }
+
+    /// Ground contact force on one foot (0 left, 1 right) over the last physics step, N.
+    fn foot_force(&self, side: usize) -> [f64; 3] {
+        let dt = f64::from(self.world.integration_parameters.dt);
+        let mut f = Vector3::zeros();
+        for c in &self.feet[side] {
+            if let Some(pair) = self.world.narrow_phase.contact_pair(*c, self.ground) {
+                let i = pair.total_impulse();
+                let sign = if pair.collider1 == *c { -1.0 } else { 1.0 };
+                f += sign * Vector3::new(f64::from(i.x), f64::from(i.y), f64::from(i.z)) / dt;
+            }
+        }
+        [f.x, f.y, f.z]
+    }
+
+    /// Every body's motion from its zero pose (welded bodies follow the torso), for
+    /// replays and checks.
+    #[must_use]
+    pub fn body_motions(&self) -> Vec<Iso> {
+        let torso = self.motion_of(self.torso, 0);
+        self.places
+            .iter()
+            .enumerate()
+            .map(|(i, p)| match p {
+                Place::Own(h) => self.motion_of(*h, i),
+                Place::Welded(rel) => torso * rel,
+            })
+            .collect()
+    }
+
+    fn motion_of(&self, h: RigidBodyHandle, body: usize) -> Iso {
+        let p = from_pose(self.world.bodies[h].position());
+        p * nalgebra::Translation3::from(-Vector3::from(self.model.bodies[body].centre))
+    }
+
+    /// Every body's pose as (x, y, z, qx, qy, qz, qw) of its centre, for replays.
+    #[must_use]
+    pub fn body_poses(&self) -> Vec<[f64; 7]> {
+        self.body_motions()
+            .iter()
+            .zip(&self.model.bodies)
+            .map(|(g, b)| {
+                let c = kinematics::moved(g, b.centre);
+                let q = g.rotation.quaternion();
+                [c[0], c[1], c[2], q.i, q.j, q.k, q.w]
+            })
+            .collect()
+    }
+
+    /// The exact bits of every body's position, rotation and velocities: equal
+    /// vectors mean identical simulations.
+    #[must_use]
+    pub fn state_bits(&self) -> Vec<u32> {
+        let mut out = Vec::with_capacity(self.own_bodies.len() * 13);
+        for h in &self.own_bodies {
+            let rb = &self.world.bodies[*h];
+            let p = rb.position();
+            let (lv, av) = (rb.linvel(), rb.angvel());
+            for x in [
+                p.translation.x,
+                p.translation.y,
+                p.translation.z,
+                p.rotation.x,
+                p.rotation.y,
+                p.rotation.z,
+                p.rotation.w,
+                lv.x,
+                lv.y,
+                lv.z,
+                av.x,
+                av.y,
+                av.z,
+            ] {
+                out.push(x.to_bits());
+            }
+        }
+        out
+    }
+
+    /// Velocity commands of the league's P servo towards `targets` (rad), plus a
+    /// feed-forward velocity `ff` (rad/s) — what league agents send.
+    #[must_use]
+    pub fn servo(&self, measured: &[f64], targets: &[f64], ff: &[f64]) -> Vec<f64> {
+        measured
+            .iter()
+            .zip(targets)
+            .zip(ff)
+            .map(|((m, t), f)| f + SERVO_GAIN * (t - m))
+            .collect()
+    }
+}
+
+/// A standing posture: arms down, knees slightly bent, feet flat.
+#[must_use]
+pub fn standing_angles(model: &NaoModel) -> Vec<f64> {
+    let deg = std::f64::consts::PI / 180.0;
+    model
+        .joints
+        .iter()
+        .map(|j| match &j.name[1..] {
+            "ae1" => -90.0 * deg,
+            "ae2" if j.name.starts_with('l') => 8.0 * deg,
+            "ae2" => -8.0 * deg,
+            "le3" => 20.0 * deg,
+            "le4" => -40.0 * deg,
+            "le5" => 20.0 * deg,
+            _ => 0.0,
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nao::model::Morphology;
+
+    fn model(t: u8) -> NaoModel {
+        NaoModel::new(Morphology::of_type(t).unwrap()).unwrap()
+    }
+
+    #[test]
+    fn rapier_pose_matches_forward_kinematics() {
+        for weld in [false, true] {
+            let m = model(4);
+            let q = standing_angles(&m);
+            let settings = SimSettings {
+                weld_upper_body: weld,
+                ..SimSettings::default()
+            };
+            let sim = Sim::new(&m, settings, &Start::upright(q.clone())).unwrap();
+            let ours = sim.body_motions();
+            let angles = sim.joint_angles();
+            for (a, b) in angles.iter().zip(&q) {
+                assert!((a - b).abs() < 1e-6, "{a} {b}");
+            }
+            let root = ours[0];
+            let fk = kinematics::body_motions(&m, &q, &root);
+            for (i, (g, f)) in ours.iter().zip(&fk).enumerate() {
+                let c = kinematics::moved(g, m.bodies[i].centre);
+                let d = kinematics::moved(f, m.bodies[i].centre);
+                for k in 0..3 {
+                    assert!(
+                        (c[k] - d[k]).abs() < 1e-5,
+                        "{} {c:?} {d:?}",
+                        m.bodies[i].name
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn standing_holds_ten_seconds_within_a_centimetre() {
+        for t in [0, 4] {
+            let m = model(t);
+            let q = standing_angles(&m);
+            let mut sim = Sim::new(&m, SimSettings::default(), &Start::upright(q.clone())).unwrap();
+            let zero = vec![0.0; q.len()];
+            let z0 = sim.perceive().torso_position_m[2];
+            for _ in 0..500 {
+                let p = sim.perceive();
+                let cmd = sim.servo(&p.joint_angles_rad, &q, &zero);
+                let p = sim.step(&cmd).unwrap();
+                assert!(!fallen(&p));
+                assert!(
+                    (p.torso_position_m[2] - z0).abs() < 0.01,
+                    "type {t}: {:?}",
+                    p.torso_position_m
+                );
+                // Weight on the feet (4.6 kg).
+                let fz = p.foot_force_n[0][2] + p.foot_force_n[1][2];
+                assert!(fz > 0.0);
+            }
+        }
+    }
+
+    #[test]
+    fn a_robot_started_tilted_falls_and_is_detected() {
+        let m = model(0);
+        let q = standing_angles(&m);
+        let start = Start {
+            angles: q.clone(),
+            pitch_rad: 30f64.to_radians(),
+            roll_rad: 0.0,
+        };
+        let mut sim = Sim::new(&m, SimSettings::default(), &start).unwrap();
+        let zero = vec![0.0; q.len()];
+        let mut fell_at = None;
+        for _ in 0..250 {
+            let p = sim.perceive();
+            let cmd = sim.servo(&p.joint_angles_rad, &q, &zero);
+            let p = sim.step(&cmd).unwrap();
+            if fallen(&p) {
+                fell_at = Some(p.time_s);
+                break;
+            }
+        }
+        assert!(fell_at.is_some_and(|t| t < 5.0), "{fell_at:?}");
+    }
+
+    #[test]
+    fn the_same_run_twice_gives_identical_bits() {
+        let m = model(0);
+        let q = standing_angles(&m);
+        let run = || {
+            let mut sim = Sim::new(&m, SimSettings::default(), &Start::upright(q.clone())).unwrap();
+            for k in 0..150 {
+                let p = sim.perceive();
+                let t = f64::from(k) * CYCLE_S;
+                let target: Vec<f64> = q.iter().map(|a| a + 0.2 * (5.0 * t).sin()).collect();
+                let ff = vec![0.0; q.len()];
+                let cmd = sim.servo(&p.joint_angles_rad, &target, &ff);
+                sim.step(&cmd).unwrap();
+            }
+            sim.state_bits()
+        };
+        let a = run();
+        assert_eq!(a, run());
+        assert!(!a.is_empty());
+    }
+
+    #[test]
+    fn bad_commands_are_refused() {
+        let m = model(0);
+        let q = standing_angles(&m);
+        let mut sim = Sim::new(&m, SimSettings::default(), &Start::upright(q.clone())).unwrap();
+        assert!(matches!(sim.step(&[0.0; 3]), Err(SimError::Arity { .. })));
+        let mut nan = vec![0.0; q.len()];
+        nan[5] = f64::NAN;
+        assert!(matches!(sim.step(&nan), Err(SimError::NonFinite(_))));
+        let mut bad = Start::upright(q);
+        bad.angles[0] = f64::INFINITY;
+        assert!(Sim::new(&m, SimSettings::default(), &bad).is_err());
+    }
+}

@@ -1,0 +1,259 @@
+//! One walking trial of the NAO: build the robot for p, stand it at the
+//! origin facing +x in the walk's posture, walk for the trial's duration, stop
+//! early on a fall. A pure function of (p, seed, duration, settings).
+//!
+//! # Per-trial noise (all from the trial's seed)
+//! Sized, as `walk-feasibility` found, at 3–5× "tiny" so that success rates
+//! between 0 and 1 appear near the limits of stability while the expert set
+//! keeps walking:
+//! - initial pose jitter: every joint uniform ±[`INIT_JITTER_DEG`]°;
+//! - joint sensor noise: N(0, [`SENSOR_NOISE_DEG`]°) per joint per cycle;
+//! - actuator noise: N(0, [`ACTUATOR_NOISE_RAD_S`]) rad/s added to each command;
+//! - ground friction: uniform in [`FRICTION_RANGE`].
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+
+use super::model::{ModelError, NaoModel};
+use super::sim::{fallen, standing_angles, Perception, Sim, SimError, SimSettings, Start, CYCLE_S};
+use super::walk::{Gait, WalkParams};
+use crate::synthetic::gauss;
+
+/// Initial joint jitter, ± degrees.
+pub const INIT_JITTER_DEG: f64 = 2.0;
+/// Joint sensor noise σ, degrees.
+pub const SENSOR_NOISE_DEG: f64 = 1.0;
+/// Actuator noise σ, rad/s.
+pub const ACTUATOR_NOISE_RAD_S: f64 = 0.1;
+/// Ground friction spread.
+pub const FRICTION_RANGE: (f64, f64) = (0.7, 1.1);
+
+/// What one trial did.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct NaoTrial {
+    /// The trial's seed.
+    pub seed: u64,
+    /// Whether it fell.
+    pub fell: bool,
+    /// Torso displacement forward, m.
+    pub x: f64,
+    /// Torso displacement left, m.
+    pub y: f64,
+    /// Simulated time of the fall, s.
+    pub fall_time_s: Option<f64>,
+    /// Simulated time run, s.
+    pub sim_time_s: f64,
+}
+
+/// Why a trial could not run.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum NaoTrialError {
+    /// The morphology cannot be built.
+    #[error(transparent)]
+    Model(#[from] ModelError),
+    /// The simulation could not start.
+    #[error(transparent)]
+    Sim(#[from] SimError),
+}
+
+/// Runs one trial of parameter set `params` (named; unset ones at expert).
+pub fn run(
+    robot_type: u8,
+    params: &[(String, f64)],
+    seed: u64,
+    duration_s: f64,
+    settings: SimSettings,
+) -> Result<NaoTrial, NaoTrialError> {
+    run_observed(
+        robot_type,
+        params,
+        seed,
+        duration_s,
+        settings,
+        &mut |_, _| {},
+    )
+}
+
+/// [`run`], calling `observe` after every cycle (to record every body's pose
+/// with [`Sim::body_poses`] for a replay, or to check the robot).
+pub fn run_observed(
+    robot_type: u8,
+    params: &[(String, f64)],
+    seed: u64,
+    duration_s: f64,
+    mut settings: SimSettings,
+    observe: &mut dyn FnMut(&Sim, &Perception),
+) -> Result<NaoTrial, NaoTrialError> {
+    let model = NaoModel::with_params(robot_type, params)?;
+    let walk = WalkParams::from_named(params);
+    let gait = Gait::new(&model, walk, duration_s);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let rest = standing_angles(&model);
+    let q0 = gait.targets(&model, &rest, 0.0);
+    let jitter = INIT_JITTER_DEG.to_radians();
+    let start: Vec<f64> = q0
+        .iter()
+        .map(|q| q + rng.random_range(-jitter..=jitter))
+        .collect();
+    settings.friction = rng.random_range(FRICTION_RANGE.0..=FRICTION_RANGE.1);
+    let mut sim = Sim::new(&model, settings, &Start::upright(start))?;
+    let p0 = sim.perceive().torso_position_m;
+    let cycles = (duration_s / CYCLE_S).round() as u64;
+    let sensor = SENSOR_NOISE_DEG.to_radians();
+    let mut q_now = q0;
+    let mut perception = sim.perceive();
+    let mut fall_time_s = None;
+    for k in 0..cycles {
+        let t = k as f64 * CYCLE_S;
+        let q_next = gait.targets(&model, &rest, t + CYCLE_S);
+        let cmd: Vec<f64> = perception
+            .joint_angles_rad
+            .iter()
+            .zip(&q_now)
+            .zip(&q_next)
+            .map(|((m, a), b)| {
+                let measured = m + sensor * gauss(&mut rng);
+                (b - a) / CYCLE_S
+                    + super::sim::SERVO_GAIN * (b - measured)
+                    + ACTUATOR_NOISE_RAD_S * gauss(&mut rng)
+            })
+            .collect();
+        perception = match sim.step(&cmd) {
+            Ok(p) => p,
+            Err(SimError::Diverged(t)) => {
+                // An exploded simulation is a fall, never a distance.
+                return Ok(NaoTrial {
+                    seed,
+                    fell: true,
+                    x: 0.0,
+                    y: 0.0,
+                    fall_time_s: Some(t),
+                    sim_time_s: t,
+                });
+            }
+            Err(e) => return Err(e.into()),
+        };
+        q_now = q_next;
+        observe(&sim, &perception);
+        if fallen(&perception) {
+            fall_time_s = Some(perception.time_s);
+            break;
+        }
+    }
+    let p = perception.torso_position_m;
+    Ok(NaoTrial {
+        seed,
+        fell: fall_time_s.is_some(),
+        x: p[0] - p0[0],
+        y: p[1] - p0[1],
+        fall_time_s,
+        sim_time_s: perception.time_s,
+    })
+}
+
+/// Runs `n` trials of one parameter set on up to `threads` threads, seeds
+/// `seed0, seed0 + 1, …`; results in seed order whatever the threads.
+pub fn run_many(
+    robot_type: u8,
+    params: &[(String, f64)],
+    seed0: u64,
+    n: u64,
+    duration_s: f64,
+    threads: usize,
+) -> Result<Vec<NaoTrial>, NaoTrialError> {
+    let threads = threads.clamp(1, 64);
+    let next = std::sync::atomic::AtomicU64::new(0);
+    let mut out: Vec<Result<NaoTrial, NaoTrialError>> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..threads)
+            .map(|_| {
+                s.spawn(|| {
+                    let mut mine = Vec::new();
+                    loop {
+                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        if i >= n {
+                            break mine;
+                        }
+                        let seed = seed0.wrapping_add(i);
+                        mine.push(run(
+                            robot_type,
+                            params,
+                            seed,
+                            duration_s,
+                            SimSettings::default(),
+                        ));
+                    }
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().unwrap_or_default())
+            .collect()
+    });
+    out.sort_by_key(|r| r.as_ref().map_or(0, |t| t.seed.wrapping_sub(seed0)));
+    if out.len() as u64 != n {
+        return Err(NaoTrialError::Sim(SimError::Settings(
+            "a trial thread panicked".into(),
+        )));
+    }
+    out.into_iter().collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn same_seed_same_bits_other_seed_other_numbers() {
+        let a = run(0, &[], 11, 3.0, SimSettings::default()).unwrap();
+        let b = run(0, &[], 11, 3.0, SimSettings::default()).unwrap();
+        let c = run(0, &[], 12, 3.0, SimSettings::default()).unwrap();
+        assert_eq!(a.x.to_bits(), b.x.to_bits());
+        assert_eq!(a.y.to_bits(), b.y.to_bits());
+        assert_ne!(a.x.to_bits(), c.x.to_bits());
+    }
+
+    #[test]
+    fn walking_keeps_joints_within_a_degree_of_their_limits() {
+        let model = NaoModel::with_params(0, &[]).unwrap();
+        let tol = 1f64.to_radians();
+        let mut cycles = 0;
+        let t = run_observed(0, &[], 3, 10.0, SimSettings::default(), &mut |_, p| {
+            cycles += 1;
+            for (j, a) in model.joints.iter().zip(&p.joint_angles_rad) {
+                assert!(
+                    *a >= j.limits_rad.0 - tol && *a <= j.limits_rad.1 + tol,
+                    "{} at {a} outside {:?}",
+                    j.name,
+                    j.limits_rad
+                );
+            }
+        })
+        .unwrap();
+        assert!(cycles > 10, "{t:?}");
+    }
+
+    #[test]
+    fn sets_at_the_extremes_of_l_can_fall() {
+        let corners = [
+            [
+                ("ratio_flexion", 0.95),
+                ("xlength_step_max", 0.15),
+                ("height_lift", 0.07),
+            ],
+            [
+                ("ratio_flexion", 0.60),
+                ("xlength_step_max", 0.15),
+                ("height_lift", 0.07),
+            ],
+        ];
+        let mut falls = 0;
+        for c in corners {
+            let p: Vec<(String, f64)> = c.iter().map(|(n, v)| ((*n).to_string(), *v)).collect();
+            let ts = run_many(0, &p, 0, 4, 10.0, 2).unwrap();
+            falls += ts.iter().filter(|t| t.fell).count();
+        }
+        assert!(falls > 0);
+    }
+}

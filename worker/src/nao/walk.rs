@@ -1,0 +1,435 @@
+//! The walk engine: a 3D linear-inverted-pendulum (LIP-3D) gait with analytic
+//! leg inverse kinematics derived from the morphology it drives.
+//!
+//! It must stay a pure planner: joint targets as a function of time and
+//! parameters, no physics and no randomness (noise belongs to the trial).
+//!
+//! # The five parameters (experiment 2 of `evolve.md`)
+//! - `ThighRelHip2_Z` changes the thigh, hence the robot *and* the IK.
+//! - `ratio_flexion`: hip-centre height above the ankle-pitch axis over the
+//!   stretched leg (thigh + tibia); it sets the CoM height of the pendulum.
+//! - `long_offset_MidAnkles_2_Torso_Init`: the hip midpoint rides this far
+//!   ahead of the pendulum's CoM/ZMP plan, m.
+//! - `height_lift`: peak lift of the swing ankle, profile (1 − cos 2πs)/2, m.
+//! - `xlength_step_max`: how far the swing foot lands ahead of the support
+//!   foot, m; the first two steps are half as long.
+//!
+//! # Engine constants (values and why)
+//! - Step period [`STEP_PERIOD_S`] 0.40 s: the joint speed cap of 6.14 rad/s
+//!   bounds it from below (~0.35 s for this gait at the expert set); 0.40 s
+//!   leaves room for longer steps before the cap bites.
+//! - Double support [`DOUBLE_SUPPORT`] 10 % of a step: enough to hand the ZMP
+//!   over; longer shortens the swing and raises joint speeds.
+//! - Lateral sway: the ZMP sits on the support-foot centre (`k_sway` 1), and the
+//!   CoM follows the bounded LIPM solution (the ZMP plan convolved with
+//!   exp(−|t|/Tc)/(2Tc)), which starts from rest with no special case.
+//! - Foot spacing: the hip width (feet under the hips).
+//! - CoM height: hip height + [`COM_ABOVE_HIP_M`] 0.03 m (the torso's mass).
+//! - Stance hip-roll compensation [`HIP_ROLL_COMP_RAD`] 0.20 rad during single
+//!   support, ramped over the first and last 20 %: the torso rolls towards the
+//!   swing side and the swing foot lands early. Measured on the rapier robot
+//!   (expert set, no noise, 2 × 10 ms steps): 0 → 0.54 m, 0.10 → 1.25 m,
+//!   0.20 → 1.6–1.8 m (the plan's 1.75 m), 0.25 → more lateral drift.
+//! - Stepping starts at [`START_S`] 0.5 s after a still start.
+//! - No sensor feedback: the gait is open loop; the servos get the target plus
+//!   a velocity feed-forward (without it the P servo lags ~0.12 s, a third of
+//!   a step, and motions shrink).
+
+use nalgebra::{Unit, UnitQuaternion, Vector3};
+
+use super::model::NaoModel;
+
+/// Step period, s.
+pub const STEP_PERIOD_S: f64 = 0.40;
+/// Double-support share of a step.
+pub const DOUBLE_SUPPORT: f64 = 0.10;
+/// CoM above the hip centre, m.
+pub const COM_ABOVE_HIP_M: f64 = 0.03;
+/// Stance hip-roll compensation, rad.
+pub const HIP_ROLL_COMP_RAD: f64 = 0.20;
+/// Stepping starts at, s.
+pub const START_S: f64 = 0.5;
+/// Ankle-roll anchor above the sole, m.
+pub const ANKLE_H: f64 = 0.045;
+/// Knee and ankle-pitch axis forward of the hip, m.
+pub const KNEE_FORWARD: f64 = 0.005;
+/// Ankle-pitch axis above the ankle-roll anchor, m.
+pub const PITCH_ABOVE_ROLL: f64 = 0.005;
+const G: f64 = 9.81;
+const GRID_S: f64 = 0.005;
+
+/// The walk's parameters (experiment 2's L minus the morphology).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WalkParams {
+    /// `ratio_flexion`.
+    pub ratio_flexion: f64,
+    /// `long_offset_MidAnkles_2_Torso_Init`, m.
+    pub long_offset: f64,
+    /// `height_lift`, m.
+    pub height_lift: f64,
+    /// `xlength_step_max`, m.
+    pub step_length: f64,
+}
+
+impl WalkParams {
+    /// The paper's expert values.
+    pub const EXPERT: Self = Self {
+        ratio_flexion: 0.73,
+        long_offset: 0.011,
+        height_lift: 0.042,
+        step_length: 0.08,
+    };
+
+    /// From named values, the expert value for any not given.
+    #[must_use]
+    pub fn from_named(params: &[(String, f64)]) -> Self {
+        let get = |n: &str, d: f64| params.iter().find(|(k, _)| k == n).map_or(d, |(_, v)| *v);
+        let e = Self::EXPERT;
+        Self {
+            ratio_flexion: get("ratio_flexion", e.ratio_flexion),
+            long_offset: get("long_offset_MidAnkles_2_Torso_Init", e.long_offset),
+            height_lift: get("height_lift", e.height_lift),
+            step_length: get("xlength_step_max", e.step_length),
+        }
+    }
+}
+
+/// Leg geometry for the IK, from the morphology.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Leg {
+    /// Hip → knee, vertical, m.
+    pub thigh: f64,
+    /// Knee → ankle pitch, m.
+    pub tibia: f64,
+    /// Hip centre (x, |y|, z) relative to the torso centre, m.
+    pub hip: [f64; 3],
+}
+
+impl Leg {
+    /// The legs of a model.
+    #[must_use]
+    pub fn of(model: &NaoModel) -> Self {
+        let m = &model.morphology;
+        Self {
+            thigh: m.thigh_m(),
+            tibia: m.tibia_m(),
+            hip: [-0.01, m.hip1_rel_torso_x, m.hip1_rel_torso_z],
+        }
+    }
+}
+
+fn wrap(a: f64) -> f64 {
+    let t = std::f64::consts::TAU;
+    (a + std::f64::consts::PI).rem_euclid(t) - std::f64::consts::PI
+}
+
+/// Leg angles (yaw-pitch, roll, hip pitch, knee, ankle pitch, ankle roll) that
+/// put the ankle-pitch point at `p` (relative to that side's hip centre, torso
+/// axes) with the foot parallel to the torso; yaw-pitch stays 0.
+#[must_use]
+pub fn leg_ik_pitch_point(p: [f64; 3], leg: &Leg) -> [f64; 6] {
+    let (px, py, pz) = (p[0], p[1], p[2]);
+    let q2 = py.atan2(-pz);
+    let zr = -q2.sin() * py + q2.cos() * pz;
+    let (l1, l2, d) = (leg.thigh, leg.tibia, KNEE_FORWARD);
+    let a = l1.hypot(d);
+    let phi0 = d.atan2(l1);
+    let r2 = px * px + zr * zr;
+    let c = ((r2 - d * d - l1 * l1 - l2 * l2) / (2.0 * l2 * a)).clamp(-1.0, 1.0);
+    let beta4 = c.acos() - phi0;
+    let q4 = -beta4;
+    let (vx, vz) = (d - l2 * beta4.sin(), -l1 - l2 * beta4.cos());
+    let q3 = wrap(zr.atan2(px) - vz.atan2(vx));
+    [0.0, q2, q3, q4, -(q3 + q4), -q2]
+}
+
+/// Leg angles that put the ankle-roll anchor (45 mm above the sole) at `p`
+/// relative to that side's hip centre, foot parallel to the torso.
+#[must_use]
+pub fn leg_ik(p: [f64; 3], leg: &Leg) -> [f64; 6] {
+    // The roll anchor sits 5 mm below the pitch point along the ankle body's
+    // z axis, which the roll angle tilts: a fixed point converges in a few steps.
+    let mut q = [0.0; 6];
+    for _ in 0..12 {
+        let up = UnitQuaternion::from_axis_angle(&Unit::new_unchecked(Vector3::x()), q[1])
+            * Vector3::new(0.0, 0.0, PITCH_ABOVE_ROLL);
+        q = leg_ik_pitch_point([p[0] + up.x, p[1] + up.y, p[2] + up.z], leg);
+    }
+    q
+}
+
+/// Where the gait puts the hip midpoint and the two ankle-roll anchors, world frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GaitState {
+    /// Hip midpoint, m.
+    pub hip: [f64; 3],
+    /// Left and right ankle-roll anchors, m.
+    pub feet: [[f64; 3]; 2],
+    /// Support side (0 left, 1 right) and single-support weight, when stepping.
+    pub support: Option<(usize, f64)>,
+}
+
+/// A planned walk for one robot and parameter set.
+#[derive(Debug, Clone)]
+pub struct Gait {
+    p: WalkParams,
+    leg: Leg,
+    /// Hip centre above the ankle-roll anchor, m.
+    hip_height: f64,
+    foot_y: f64,
+    steps: Vec<f64>,
+    grid_start: f64,
+    com: Vec<[f64; 2]>,
+}
+
+impl Gait {
+    /// Plans `duration_s` seconds of walking.
+    #[must_use]
+    pub fn new(model: &NaoModel, p: WalkParams, duration_s: f64) -> Self {
+        let leg = Leg::of(model);
+        let hip_height = p.ratio_flexion * (leg.thigh + leg.tibia) + PITCH_ABOVE_ROLL;
+        let zc = hip_height + ANKLE_H + COM_ABOVE_HIP_M;
+        let tc = (zc / G).sqrt();
+        let foot_y = leg.hip[1];
+        let nsteps = ((duration_s + 10.0 * tc) / STEP_PERIOD_S) as usize + 4;
+        let mut steps = vec![0.0; nsteps + 1];
+        for k in 0..nsteps {
+            let len = if k < 2 {
+                p.step_length / 2.0
+            } else {
+                p.step_length
+            };
+            steps[k + 1] = steps[k] + len;
+        }
+        let mut g = Self {
+            p,
+            leg,
+            hip_height,
+            foot_y,
+            steps,
+            grid_start: 0.0,
+            com: Vec::new(),
+        };
+        g.plan_com(duration_s, tc);
+        g
+    }
+
+    /// The ZMP plan at time t: support-foot centre, handed over linearly during
+    /// double support.
+    fn zmp(&self, t: f64) -> [f64; 2] {
+        if t < START_S {
+            return [0.0, 0.0];
+        }
+        let x = (t - START_S) / STEP_PERIOD_S;
+        let k = x.floor() as usize;
+        let u = x - k as f64;
+        let sgn = if k.is_multiple_of(2) { 1.0 } else { -1.0 };
+        let step = |i: usize| self.steps[i.min(self.steps.len() - 1)];
+        let cur = [step(k), sgn * self.foot_y];
+        let prev = if k == 0 {
+            [0.0, 0.0]
+        } else {
+            [step(k - 1), -sgn * self.foot_y]
+        };
+        let a = (u / DOUBLE_SUPPORT).min(1.0);
+        [
+            prev[0] + (cur[0] - prev[0]) * a,
+            prev[1] + (cur[1] - prev[1]) * a,
+        ]
+    }
+
+    /// The bounded LIPM solution: the ZMP plan convolved with exp(−|t|/Tc)/(2Tc).
+    fn plan_com(&mut self, duration_s: f64, tc: f64) {
+        let pad = 8.0 * tc;
+        let n = (pad / GRID_S).round() as usize;
+        let total = ((duration_s + 2.0 * pad) / GRID_S).ceil() as usize + 2;
+        self.grid_start = -pad;
+        let zmp: Vec<[f64; 2]> = (0..total + 2 * n)
+            .map(|i| self.zmp(-pad + (i as f64 - n as f64) * GRID_S))
+            .collect();
+        let ker: Vec<f64> = (0..=2 * n)
+            .map(|i| (-((i as f64 - n as f64).abs() * GRID_S) / tc).exp())
+            .collect();
+        let sum: f64 = ker.iter().sum();
+        self.com = (0..total)
+            .map(|i| {
+                let mut c = [0.0, 0.0];
+                for (j, k) in ker.iter().enumerate() {
+                    let z = zmp[i + j];
+                    c[0] += k * z[0];
+                    c[1] += k * z[1];
+                }
+                [c[0] / sum, c[1] / sum]
+            })
+            .collect();
+    }
+
+    fn com_at(&self, t: f64) -> [f64; 2] {
+        let x = (t - self.grid_start) / GRID_S;
+        let i = (x.floor().max(0.0) as usize).min(self.com.len().saturating_sub(2));
+        let f = (x - i as f64).clamp(0.0, 1.0);
+        let (a, b) = (self.com[i], self.com[i + 1]);
+        [a[0] + (b[0] - a[0]) * f, a[1] + (b[1] - a[1]) * f]
+    }
+
+    /// The hip midpoint and feet at time t.
+    #[must_use]
+    pub fn state(&self, t: f64) -> GaitState {
+        let w = self.foot_y;
+        let mut feet = [[0.0, w, ANKLE_H], [0.0, -w, ANKLE_H]];
+        let mut support = None;
+        if t >= START_S {
+            let x = (t - START_S) / STEP_PERIOD_S;
+            let k = x.floor() as usize;
+            let u = x - k as f64;
+            let sup = k % 2; // 0 left, 1 right
+            let sw = 1 - sup;
+            let step = |i: usize| self.steps[i.min(self.steps.len() - 1)];
+            let s = if u <= DOUBLE_SUPPORT {
+                0.0
+            } else {
+                (u - DOUBLE_SUPPORT) / (1.0 - DOUBLE_SUPPORT)
+            };
+            let sx = (1.0 - (std::f64::consts::PI * s).cos()) / 2.0;
+            let x0 = if k >= 1 { step(k - 1) } else { 0.0 };
+            let x1 = step(k + 1);
+            let lift = self.p.height_lift * (1.0 - (std::f64::consts::TAU * s).cos()) / 2.0;
+            let side_y = |side: usize| if side == 0 { w } else { -w };
+            feet[sup] = [step(k), side_y(sup), ANKLE_H];
+            feet[sw] = [x0 + (x1 - x0) * sx, side_y(sw), ANKLE_H + lift];
+            let wgt = if s > 0.0 {
+                (5.0 * s).min(5.0 * (1.0 - s)).min(1.0)
+            } else {
+                0.0
+            };
+            support = Some((sup, wgt));
+        }
+        let c = self.com_at(t);
+        GaitState {
+            hip: [c[0] + self.p.long_offset, c[1], ANKLE_H + self.hip_height],
+            feet,
+            support,
+        }
+    }
+
+    /// Leg joint targets at time t: `[left six, right six]` in the order
+    /// le1..le6, with the stance hip-roll compensation.
+    #[must_use]
+    pub fn leg_targets(&self, t: f64) -> [[f64; 6]; 2] {
+        let st = self.state(t);
+        let mut out = [[0.0; 6]; 2];
+        for (side, o) in out.iter_mut().enumerate() {
+            let y = if side == 0 {
+                self.leg.hip[1]
+            } else {
+                -self.leg.hip[1]
+            };
+            let f = st.feet[side];
+            let p = [f[0] - st.hip[0], f[1] - st.hip[1] - y, f[2] - st.hip[2]];
+            *o = leg_ik(p, &self.leg);
+        }
+        if let Some((sup, wgt)) = st.support {
+            let sgn = if sup == 0 { 1.0 } else { -1.0 };
+            out[sup][1] += sgn * HIP_ROLL_COMP_RAD * wgt;
+        }
+        out
+    }
+
+    /// Targets for every model joint at time t (arms and head at their rest posture).
+    #[must_use]
+    pub fn targets(&self, model: &NaoModel, rest: &[f64], t: f64) -> Vec<f64> {
+        let legs = self.leg_targets(t);
+        let mut q = rest.to_vec();
+        for (j, joint) in model.joints.iter().enumerate() {
+            let side = match joint.name.as_bytes().first() {
+                Some(b'l') => 0,
+                Some(b'r') => 1,
+                _ => continue,
+            };
+            if let Some(k) = joint
+                .name
+                .strip_prefix(['l', 'r'])
+                .and_then(|s| s.strip_prefix("le"))
+            {
+                if let Ok(i) = k.parse::<usize>() {
+                    if (1..=6).contains(&i) {
+                        q[j] = legs[side][i - 1];
+                    }
+                }
+            }
+        }
+        q
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nao::kinematics::{body_motions, moved, Iso};
+    use crate::nao::model::Morphology;
+    use rand::{Rng, SeedableRng};
+
+    /// Forward kinematics of the IK solution reaches the asked point with a
+    /// flat foot, across the workspace and for several thighs.
+    #[test]
+    fn ik_reaches_the_asked_foot_pose() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        for tz in [-0.10, -0.08, -0.06, -0.04, -0.03, -0.01] {
+            let mut morph = Morphology::of_type(0).unwrap();
+            morph.set("ThighRelHip2_Z", tz).unwrap();
+            let model = NaoModel::new(morph).unwrap();
+            let leg = Leg::of(&model);
+            let mut checked = 0;
+            while checked < 300 {
+                let side = rng.random_range(0..2usize);
+                let reach = leg.thigh + leg.tibia;
+                let p = [
+                    rng.random_range(-0.4..0.4) * reach,
+                    rng.random_range(-0.25..0.25) * reach,
+                    -rng.random_range(0.55..0.97) * reach - PITCH_ABOVE_ROLL,
+                ];
+                let q = leg_ik(p, &leg);
+                let mut angles = vec![0.0; model.joints.len()];
+                let pre = if side == 0 { "lle" } else { "rle" };
+                let mut in_limits = true;
+                for (i, qi) in q.iter().enumerate() {
+                    let j = model.joint_index(&format!("{pre}{}", i + 1)).unwrap();
+                    let (lo, hi) = model.joints[j].limits_rad;
+                    in_limits &= *qi >= lo && *qi <= hi;
+                    angles[j] = *qi;
+                }
+                if !in_limits {
+                    continue;
+                }
+                let g = body_motions(&model, &angles, &Iso::identity());
+                let six = model.joint_index(&format!("{pre}6")).unwrap();
+                let anchor = model.joints[six].anchor;
+                let got = moved(&g[model.joints[six].child], anchor);
+                let y = if side == 0 { leg.hip[1] } else { -leg.hip[1] };
+                let hip = [leg.hip[0], y, leg.hip[2]];
+                for k in 0..3 {
+                    assert!(
+                        (got[k] - hip[k] - p[k]).abs() < 1e-6,
+                        "tz {tz} p {p:?} got {got:?}"
+                    );
+                }
+                let foot = g[model.joints[six].child].rotation;
+                assert!(foot.angle() < 1e-9, "foot not flat: {}", foot.angle());
+                checked += 1;
+            }
+        }
+    }
+
+    #[test]
+    fn gait_starts_still_and_walks_forward() {
+        let model = NaoModel::new(Morphology::of_type(0).unwrap()).unwrap();
+        let g = Gait::new(&model, WalkParams::EXPERT, 10.0);
+        let s0 = g.state(0.0);
+        assert!(
+            (s0.hip[0] - WalkParams::EXPERT.long_offset).abs() < 1e-3 && s0.hip[1].abs() < 1e-3
+        );
+        let s = g.state(9.9);
+        // Steps: half, half, then full: about (9.4 / 0.4 − 1) × 0.08 m.
+        assert!(s.hip[0] > 1.5 && s.hip[0] < 2.1, "{:?}", s.hip);
+    }
+}
