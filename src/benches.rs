@@ -38,6 +38,7 @@ pub struct ClopBenchArgs {
 pub fn bench(cmd: BenchCommand) -> Result<(), Failure> {
     match cmd {
         BenchCommand::Clop(a) => clop(&a),
+        BenchCommand::Sim(a) => crate::robot::bench_sim(&a),
     }
 }
 

@@ -70,7 +70,11 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Benchmarks: `bench clop` (regret and cost).
+    /// Hold a standing posture with the servos; report falls and torso height.
+    Stand(crate::robot::StandArgs),
+    /// Run n walking trials of one parameter set locally; print the Table IV row.
+    Trial(crate::robot::TrialArgs),
+    /// Benchmarks: `bench clop` (regret and cost), `bench sim` (physics speed).
     #[command(subcommand)]
     Bench(BenchCommand),
     /// Validate an experiment file and print it as parsed.
@@ -95,6 +99,8 @@ pub fn dispatch(cli: Cli) -> Result<(), Failure> {
             min_trial_ms,
         } => crate::farm::worker(&net, slots, min_trial_ms),
         Command::Bench(b) => crate::benches::bench(b),
+        Command::Stand(a) => crate::robot::stand(&a),
+        Command::Trial(a) => crate::robot::trial(&a),
         Command::Model {
             robot_type,
             params,
@@ -133,6 +139,8 @@ pub struct JobArgs {
 pub enum BenchCommand {
     /// CLOP: simple regret on the test problems beside baselines, and cost per step.
     Clop(crate::benches::ClopBenchArgs),
+    /// The rebuilt NAO: real-time factor and physics steps/s, standing and walking, per settings.
+    Sim(crate::robot::SimBenchArgs),
 }
 
 /// Reads and validates an experiment file (a usage error when it is bad).
@@ -199,7 +207,7 @@ fn check(path: &Path, json: bool) -> Result<(), Failure> {
     Ok(())
 }
 
-fn parse_params(params: &[String]) -> Result<Vec<(String, f64)>, Failure> {
+pub(crate) fn parse_params(params: &[String]) -> Result<Vec<(String, f64)>, Failure> {
     params
         .iter()
         .map(|p| {

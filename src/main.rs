@@ -4,6 +4,7 @@ mod benches;
 mod cli;
 mod farm;
 mod net;
+mod robot;
 
 use std::process::ExitCode;
 

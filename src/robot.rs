@@ -1,0 +1,352 @@
+//! `naofarm stand`, `naofarm trial` and `naofarm bench sim`: the rebuilt NAO
+//! run locally, without the farm.
+
+use std::time::Instant;
+
+use anyhow::anyhow;
+use clap::Args;
+use coordinator::evolve::{stats, TrialResult};
+use worker::nao::{
+    model::{Morphology, NaoModel},
+    sim::{fallen, standing_angles, Sim, SimSettings, Start, CYCLE_S},
+    trial,
+};
+
+use crate::cli::{parse_params, Failure};
+
+/// Arguments of `stand`.
+#[derive(Args, Debug)]
+pub struct StandArgs {
+    /// League robot type 0–4.
+    #[arg(long = "type", default_value_t = 0)]
+    robot_type: u8,
+    /// Override a morphology quantity, NAME=VALUE (repeatable).
+    #[arg(long = "param", value_name = "NAME=VALUE")]
+    params: Vec<String>,
+    /// Simulated seconds.
+    #[arg(long, default_value_t = 10.0)]
+    seconds: f64,
+    /// Machine-readable output.
+    #[arg(long)]
+    json: bool,
+}
+
+/// `naofarm stand`: hold the standing posture with the servos.
+pub fn stand(a: &StandArgs) -> Result<(), Failure> {
+    if !(a.seconds.is_finite() && a.seconds > 0.0 && a.seconds <= 3600.0) {
+        return Err(Failure::Usage(anyhow!("--seconds must be in (0, 3600]")));
+    }
+    let params = parse_params(&a.params)?;
+    let mut m = Morphology::of_type(a.robot_type).map_err(|e| Failure::Usage(e.into()))?;
+    for (name, v) in &params {
+        m.set(name, *v).map_err(|e| Failure::Usage(e.into()))?;
+    }
+    let model = NaoModel::new(m).map_err(|e| Failure::Usage(e.into()))?;
+    let q = standing_angles(&model);
+    let mut sim = Sim::new(&model, SimSettings::default(), &Start::upright(q.clone()))
+        .map_err(|e| Failure::Job(e.into()))?;
+    let zero = vec![0.0; q.len()];
+    let mut p = sim.perceive();
+    let (mut lo, mut hi) = (p.torso_position_m[2], p.torso_position_m[2]);
+    let mut fell_at = None;
+    let cycles = (a.seconds / CYCLE_S).round() as u64;
+    for _ in 0..cycles {
+        let cmd = sim.servo(&p.joint_angles_rad, &q, &zero);
+        p = sim.step(&cmd).map_err(|e| Failure::Job(e.into()))?;
+        lo = lo.min(p.torso_position_m[2]);
+        hi = hi.max(p.torso_position_m[2]);
+        if fell_at.is_none() && fallen(&p) {
+            fell_at = Some(p.time_s);
+        }
+    }
+    if a.json {
+        let v = serde_json::json!({
+            "robot_type": a.robot_type,
+            "seconds": p.time_s,
+            "fell": fell_at.is_some(),
+            "fall_time_s": fell_at,
+            "torso_height_min_m": lo,
+            "torso_height_max_m": hi,
+            "final_torso_position_m": p.torso_position_m,
+            "final_torso_rotation_xyzw": p.torso_rotation,
+            "final_torso_tilt_rad": p.torso_tilt_rad,
+            "final_joint_angles_rad": model.joints.iter().zip(&p.joint_angles_rad)
+                .map(|(j, a)| (j.name.clone(), serde_json::json!(a)))
+                .collect::<serde_json::Map<String, serde_json::Value>>(),
+        });
+        println!("{v}");
+    } else {
+        println!(
+            "type {} stood {:.2} s: {}",
+            a.robot_type,
+            p.time_s,
+            match fell_at {
+                Some(t) => format!("FELL at {t:.2} s"),
+                None => "did not fall".into(),
+            }
+        );
+        println!("torso height min {lo:.4} m, max {hi:.4} m");
+        let t = p.torso_position_m;
+        println!(
+            "final torso ({:.4}, {:.4}, {:.4}) m, tilt {:.2}°",
+            t[0],
+            t[1],
+            t[2],
+            p.torso_tilt_rad.to_degrees()
+        );
+    }
+    Ok(())
+}
+
+/// Arguments of `trial`.
+#[derive(Args, Debug)]
+pub struct TrialArgs {
+    /// Start from a named set (`expert`, the paper's expert values).
+    #[arg(long, default_value = "expert")]
+    set: String,
+    /// Override a parameter, NAME=VALUE (repeatable).
+    #[arg(long = "param", value_name = "NAME=VALUE")]
+    params: Vec<String>,
+    /// Number of trials.
+    #[arg(long, default_value_t = 10)]
+    trials: u64,
+    /// Seed of the first trial (then +1 per trial).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// League robot type 0–4.
+    #[arg(long = "type", default_value_t = 0)]
+    robot_type: u8,
+    /// Trial duration, simulated seconds.
+    #[arg(long, default_value_t = 10.0)]
+    duration: f64,
+    /// Threads (default: cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Machine-readable output with every trial.
+    #[arg(long)]
+    json: bool,
+}
+
+/// `naofarm trial`: n trials of one parameter set, the Table IV row.
+pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
+    if a.set != "expert" {
+        return Err(Failure::Usage(anyhow!(
+            "--set `{}`: the only named set is `expert`",
+            a.set
+        )));
+    }
+    if a.trials == 0 || a.trials > 100_000 {
+        return Err(Failure::Usage(anyhow!("--trials must be in 1..=100000")));
+    }
+    if !(a.duration.is_finite() && a.duration > 0.0 && a.duration <= 600.0) {
+        return Err(Failure::Usage(anyhow!("--duration must be in (0, 600] s")));
+    }
+    let params = parse_params(&a.params)?;
+    for (name, v) in &params {
+        protocol::params::check_value(name, *v).map_err(|e| Failure::Usage(anyhow!(e)))?;
+    }
+    NaoModel::with_params(a.robot_type, &params).map_err(|e| Failure::Usage(e.into()))?;
+    let threads = a
+        .threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from));
+    let t0 = Instant::now();
+    let runs = trial::run_many(a.robot_type, &params, a.seed, a.trials, a.duration, threads)
+        .map_err(|e| Failure::Job(e.into()))?;
+    let wall = t0.elapsed().as_secs_f64();
+    let results: Vec<TrialResult> = runs
+        .iter()
+        .map(|t| TrialResult {
+            fell: t.fell,
+            x_m: t.x,
+            y_m: t.y,
+            fall_time_s: t.fall_time_s,
+            sim_time_s: t.sim_time_s,
+            worker: "local".into(),
+        })
+        .collect();
+    let s = stats(&results);
+    if a.json {
+        let v = serde_json::json!({
+            "params": params.iter().map(|(k, v)| (k.clone(), serde_json::json!(v))).collect::<serde_json::Map<_, _>>(),
+            "robot_type": a.robot_type,
+            "s": s.s,
+            "mx": s.mx,
+            "my": s.my,
+            "ex": s.ex,
+            "ey": s.ey,
+            "trials": runs,
+            "wall_s": wall,
+        });
+        println!("{v}");
+    } else {
+        let f = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.3}"));
+        println!(
+            "     s     mx     my     ex     ey   (m; {} trials of {} s)",
+            a.trials, a.duration
+        );
+        println!(
+            "{:6.2} {:>6} {:>6} {:>6} {:>6}",
+            s.s,
+            f(s.mx),
+            f(s.my),
+            f(s.ex),
+            f(s.ey)
+        );
+        println!(
+            "{:.1} trials/s on {threads} threads ({wall:.2} s wall)",
+            a.trials as f64 / wall
+        );
+    }
+    Ok(())
+}
+
+/// Arguments of `bench sim`.
+#[derive(Args, Debug)]
+pub struct SimBenchArgs {
+    /// Simulated seconds per measurement.
+    #[arg(long, default_value_t = 10.0)]
+    seconds: f64,
+    /// Machine-readable output.
+    #[arg(long)]
+    json: bool,
+}
+
+struct Row {
+    label: String,
+    motion: &'static str,
+    settings: SimSettings,
+    sim_s: f64,
+    wall_s: f64,
+    fell: bool,
+}
+
+fn measure_stand(settings: SimSettings, seconds: f64) -> Result<Row, Failure> {
+    let model = NaoModel::with_params(0, &[]).map_err(|e| Failure::Job(e.into()))?;
+    let q = standing_angles(&model);
+    let t0 = Instant::now();
+    let mut sim = Sim::new(&model, settings, &Start::upright(q.clone()))
+        .map_err(|e| Failure::Job(e.into()))?;
+    let zero = vec![0.0; q.len()];
+    let mut p = sim.perceive();
+    let mut fell = false;
+    for _ in 0..(seconds / CYCLE_S).round() as u64 {
+        let cmd = sim.servo(&p.joint_angles_rad, &q, &zero);
+        p = sim.step(&cmd).map_err(|e| Failure::Job(e.into()))?;
+        fell |= fallen(&p);
+    }
+    Ok(Row {
+        label: String::new(),
+        motion: "stand",
+        settings,
+        sim_s: p.time_s,
+        wall_s: t0.elapsed().as_secs_f64(),
+        fell,
+    })
+}
+
+fn measure_walk(settings: SimSettings, seconds: f64) -> Result<Row, Failure> {
+    let t0 = Instant::now();
+    let t = trial::run_observed(0, &[], 1, seconds, settings, &mut |_, _| {})
+        .map_err(|e| Failure::Job(e.into()))?;
+    Ok(Row {
+        label: String::new(),
+        motion: "walk",
+        settings,
+        sim_s: t.sim_time_s,
+        wall_s: t0.elapsed().as_secs_f64(),
+        fell: t.fell,
+    })
+}
+
+/// `naofarm bench sim`: real-time factor and physics steps per second on one core.
+pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
+    if !(a.seconds.is_finite() && a.seconds >= 1.0 && a.seconds <= 600.0) {
+        return Err(Failure::Usage(anyhow!("--seconds must be in [1, 600]")));
+    }
+    let d = SimSettings::default();
+    let variants = [
+        ("default: 2x10ms, pgs 12, welded upper body", d),
+        (
+            "4x5ms, pgs 8, welded",
+            SimSettings {
+                substeps: 4,
+                pgs_iterations: 8,
+                ..d
+            },
+        ),
+        (
+            "2x10ms, pgs 12, full 22 hinges",
+            SimSettings {
+                weld_upper_body: false,
+                ..d
+            },
+        ),
+        (
+            "2x10ms, pgs 12, 4 solver iterations",
+            SimSettings {
+                solver_iterations: 4,
+                ..d
+            },
+        ),
+        (
+            "2x10ms, pgs 4, welded",
+            SimSettings {
+                pgs_iterations: 4,
+                ..d
+            },
+        ),
+    ];
+    let mut rows = Vec::new();
+    for (label, s) in variants {
+        for motion in ["stand", "walk"] {
+            let mut r = if motion == "stand" {
+                measure_stand(s, a.seconds)?
+            } else {
+                measure_walk(s, a.seconds)?
+            };
+            r.label = label.to_string();
+            rows.push(r);
+        }
+    }
+    let rtf = |r: &Row| r.sim_s / r.wall_s;
+    let sps = |r: &Row| r.sim_s / CYCLE_S * f64::from(r.settings.substeps) / r.wall_s;
+    let headline = rows
+        .iter()
+        .find(|r| r.motion == "walk" && r.settings == d)
+        .ok_or_else(|| Failure::Job(anyhow!("no default walk row")))?;
+    if a.json {
+        let v = serde_json::json!({
+            "realtime_factor": rtf(headline),
+            "steps_per_second": sps(headline),
+            "motion": "expert walk, type 0, default settings, one core",
+            "rows": rows.iter().map(|r| serde_json::json!({
+                "settings": r.label,
+                "motion": r.motion,
+                "substeps": r.settings.substeps,
+                "solver_iterations": r.settings.solver_iterations,
+                "pgs_iterations": r.settings.pgs_iterations,
+                "weld_upper_body": r.settings.weld_upper_body,
+                "realtime_factor": rtf(r),
+                "steps_per_second": sps(r),
+                "fell": r.fell,
+            })).collect::<Vec<_>>(),
+        });
+        println!("{v}");
+    } else {
+        println!(
+            "{:<44} {:>6} {:>10} {:>12} {:>6}",
+            "settings", "motion", "realtime×", "steps/s", "fell"
+        );
+        for r in &rows {
+            println!(
+                "{:<44} {:>6} {:>10.1} {:>12.0} {:>6}",
+                r.label,
+                r.motion,
+                rtf(r),
+                sps(r),
+                r.fell
+            );
+        }
+    }
+    Ok(())
+}
