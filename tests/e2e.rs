@@ -571,3 +571,125 @@ fn model_prints_the_robot_and_refuses_an_impossible_thigh() {
     let out = naofarm().args(["model", "--type", "7"]).output().unwrap();
     assert_eq!(out.status.code(), Some(2));
 }
+
+#[test]
+fn stand_holds_and_reports_its_fields() {
+    let out = naofarm()
+        .args(["stand", "--json", "--seconds", "3"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["fell"], false);
+    let lo = v["torso_height_min_m"].as_f64().unwrap();
+    let hi = v["torso_height_max_m"].as_f64().unwrap();
+    assert!(lo > 0.3 && hi - lo < 0.01, "{lo} {hi}");
+    let out = naofarm()
+        .args(["stand", "--param", "ThighRelHip2_Z=-0.3"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
+fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
+    let run = |seed: &str| {
+        let out = naofarm()
+            .args([
+                "trial",
+                "--json",
+                "--trials",
+                "3",
+                "--duration",
+                "3",
+                "--seed",
+                seed,
+            ])
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()
+    };
+    let a = run("5");
+    for f in ["s", "mx", "my", "ex", "ey"] {
+        assert!(a[f].is_number(), "{f}: {a}");
+    }
+    let trials = a["trials"].as_array().unwrap();
+    assert_eq!(trials.len(), 3);
+    for f in ["seed", "fell", "x", "y", "fall_time_s"] {
+        assert!(trials.iter().all(|t| t.get(f).is_some()), "{f}");
+    }
+    let b = run("5");
+    assert_eq!(a["mx"], b["mx"]);
+    assert_eq!(a["trials"], b["trials"]);
+    for bad in ["ratio_flexion=7", "Bogus=1", "height_lift=nan"] {
+        let out = naofarm()
+            .args(["trial", "--trials", "1", "--param", bad])
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(2), "{bad}");
+        assert!(!out.stderr.is_empty());
+    }
+}
+
+#[test]
+fn the_nao_farm_gives_the_same_history_with_one_or_two_workers() {
+    let dir = scratch("nao-farm");
+    let exp = dir.join("nao.toml");
+    std::fs::write(
+        &exp,
+        "name = \"nao-small\"\nseed = 3\niterations = 3\ntrials_per_iteration = 3\n\
+         trial_duration_s = 2.0\npipeline_depth = 2\nmodel = \"nao\"\nstart = \"expert\"\n\n\
+         [[parameter]]\nname = \"ratio_flexion\"\nkind = \"linear\"\nlower = 0.6\nupper = 0.95\nexpert = 0.73\n\n\
+         [[parameter]]\nname = \"xlength_step_max\"\nkind = \"linear\"\nlower = 0.02\nupper = 0.15\nexpert = 0.08\n",
+    )
+    .unwrap();
+    let run = |workers: &str| {
+        let out_dir = dir.join(format!("run-{workers}"));
+        let out = naofarm()
+            .args(["run", "--json", "--workers", workers])
+            .arg(&exp)
+            .arg("--out")
+            .arg(&out_dir)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .map(|l| {
+                let v: serde_json::Value = serde_json::from_str(l).unwrap();
+                (
+                    v["iteration"].clone(),
+                    v["decision"].clone(),
+                    v["mx"].clone(),
+                    v["params"].clone(),
+                )
+            })
+            .collect::<Vec<_>>()
+    };
+    let one = run("1");
+    assert_eq!(one.len(), 3);
+    assert_eq!(one, run("2"));
+}
+
+#[test]
+fn deploy_configs_are_valid_zenoh_configs() {
+    for f in ["router", "coordinator", "worker"] {
+        let path = root().join(format!("deploy/{f}.json5"));
+        if let Err(e) = zenoh::Config::from_file(&path) {
+            panic!("{}: {e}", path.display());
+        }
+    }
+}

@@ -204,6 +204,26 @@ pub fn run_many(
 mod tests {
     use super::*;
 
+    /// Done-when of the walk: over 100 trials the expert set walks (s ≥ 0.7,
+    /// mx ≥ 1.5 m in 10 s, my/mx < 0.25) with a spread (ex > 0).
+    #[test]
+    fn the_expert_set_walks() {
+        let ts = run_many(0, &[], 1000, 100, 10.0, 2).unwrap();
+        let ok: Vec<&NaoTrial> = ts.iter().filter(|t| !t.fell).collect();
+        let n = ok.len() as f64;
+        let s = n / ts.len() as f64;
+        let mx = ok.iter().map(|t| t.x).sum::<f64>() / n;
+        let my = ok.iter().map(|t| t.y.abs()).sum::<f64>() / n;
+        let ex = (ok.iter().map(|t| (t.x - mx).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+        assert!(s >= 0.7, "s = {s}");
+        assert!(mx >= 1.5, "mx = {mx}");
+        assert!(my / mx < 0.25, "my/mx = {}", my / mx);
+        assert!(ex > 0.0);
+        // Seed order whatever the threads.
+        let again = run_many(0, &[], 1000, 4, 10.0, 1).unwrap();
+        assert_eq!(&ts[..4], &again[..]);
+    }
+
     #[test]
     fn same_seed_same_bits_other_seed_other_numbers() {
         let a = run(0, &[], 11, 3.0, SimSettings::default()).unwrap();
