@@ -45,14 +45,12 @@ pub fn stand(a: &StandArgs) -> Result<(), Failure> {
     let q = standing_angles(&model);
     let mut sim = Sim::new(&model, SimSettings::default(), &Start::upright(q.clone()))
         .map_err(|e| Failure::Job(e.into()))?;
-    let zero = vec![0.0; q.len()];
     let mut p = sim.perceive();
     let (mut lo, mut hi) = (p.torso_position_m[2], p.torso_position_m[2]);
     let mut fell_at = None;
     let cycles = (a.seconds / CYCLE_S).round() as u64;
     for _ in 0..cycles {
-        let cmd = sim.servo(&p.joint_angles_rad, &q, &zero);
-        p = sim.step(&cmd).map_err(|e| Failure::Job(e.into()))?;
+        p = sim.hold(&q).map_err(|e| Failure::Job(e.into()))?;
         lo = lo.min(p.torso_position_m[2]);
         hi = hi.max(p.torso_position_m[2]);
         if fell_at.is_none() && fallen(&p) {
@@ -226,12 +224,10 @@ fn measure_stand(settings: SimSettings, seconds: f64) -> Result<Row, Failure> {
     let t0 = Instant::now();
     let mut sim = Sim::new(&model, settings, &Start::upright(q.clone()))
         .map_err(|e| Failure::Job(e.into()))?;
-    let zero = vec![0.0; q.len()];
     let mut p = sim.perceive();
     let mut fell = false;
     for _ in 0..(seconds / CYCLE_S).round() as u64 {
-        let cmd = sim.servo(&p.joint_angles_rad, &q, &zero);
-        p = sim.step(&cmd).map_err(|e| Failure::Job(e.into()))?;
+        p = sim.hold(&q).map_err(|e| Failure::Job(e.into()))?;
         fell |= fallen(&p);
     }
     Ok(Row {

@@ -7,6 +7,18 @@ fn naofarm() -> Command {
     Command::new(env!("CARGO_BIN_EXE_naofarm"))
 }
 
+/// Runs a command that must succeed; on failure the message shows both streams.
+fn succeed(cmd: &mut Command) -> std::process::Output {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
@@ -516,19 +528,14 @@ n_mcmc = 100
 #[test]
 fn run_completes_a_synthetic_experiment_in_one_process() {
     let dir = scratch("run");
-    let out = naofarm()
-        .args(["run", "--json", "--workers", "2", "--iterations", "8"])
-        .arg(root().join("experiments/synthetic.toml"))
-        .arg("--out")
-        .arg(dir.join("run"))
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = succeed(
+        naofarm()
+            .args(["run", "--json", "--workers", "2", "--iterations", "8"])
+            .arg(root().join("experiments/synthetic.toml"))
+            .arg("--out")
+            .arg(dir.join("run")),
     );
+    let stdout = String::from_utf8_lossy(&out.stdout);
     let lines: Vec<serde_json::Value> = stdout
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
@@ -574,15 +581,7 @@ fn model_prints_the_robot_and_refuses_an_impossible_thigh() {
 
 #[test]
 fn stand_holds_and_reports_its_fields() {
-    let out = naofarm()
-        .args(["stand", "--json", "--seconds", "3"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = succeed(naofarm().args(["stand", "--json", "--seconds", "3"]));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["fell"], false);
     let lo = v["torso_height_min_m"].as_f64().unwrap();
@@ -598,24 +597,16 @@ fn stand_holds_and_reports_its_fields() {
 #[test]
 fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
     let run = |seed: &str| {
-        let out = naofarm()
-            .args([
-                "trial",
-                "--json",
-                "--trials",
-                "3",
-                "--duration",
-                "3",
-                "--seed",
-                seed,
-            ])
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        let out = succeed(naofarm().args([
+            "trial",
+            "--json",
+            "--trials",
+            "3",
+            "--duration",
+            "3",
+            "--seed",
+            seed,
+        ]));
         serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()
     };
     let a = run("5");
@@ -654,17 +645,12 @@ fn the_nao_farm_gives_the_same_history_with_one_or_two_workers() {
     .unwrap();
     let run = |workers: &str| {
         let out_dir = dir.join(format!("run-{workers}"));
-        let out = naofarm()
-            .args(["run", "--json", "--workers", workers])
-            .arg(&exp)
-            .arg("--out")
-            .arg(&out_dir)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+        let out = succeed(
+            naofarm()
+                .args(["run", "--json", "--workers", workers])
+                .arg(&exp)
+                .arg("--out")
+                .arg(&out_dir),
         );
         String::from_utf8_lossy(&out.stdout)
             .lines()

@@ -148,7 +148,7 @@ pub struct Start {
     pub angles: Vec<f64>,
     /// Torso pitch (about y, + leans forward), rad.
     pub pitch_rad: f64,
-    /// Torso roll (about x, + leans left... right-hand rule about x), rad.
+    /// Torso roll (about x, right-hand rule: + leans the top to the right), rad.
     pub roll_rad: f64,
 }
 
@@ -707,17 +707,25 @@ impl Sim {
         out
     }
 
-    /// Velocity commands of the league's P servo towards `targets` (rad), plus a
-    /// feed-forward velocity `ff` (rad/s) — what league agents send.
-    #[must_use]
-    pub fn servo(&self, measured: &[f64], targets: &[f64], ff: &[f64]) -> Vec<f64> {
-        measured
-            .iter()
-            .zip(targets)
-            .zip(ff)
-            .map(|((m, t), f)| f + SERVO_GAIN * (t - m))
-            .collect()
+    /// One cycle of holding a posture: the league's P servo towards
+    /// `targets` (rad) from the current angles, no feed-forward.
+    pub fn hold(&mut self, targets: &[f64]) -> Result<Perception, SimError> {
+        let zero = vec![0.0; targets.len()];
+        let cmd = servo(&self.joint_angles(), targets, &zero);
+        self.step(&cmd)
     }
+}
+
+/// Velocity commands of the league's P servo towards `targets` (rad), plus a
+/// feed-forward velocity `ff` (rad/s) — what league agents send.
+#[must_use]
+pub fn servo(measured: &[f64], targets: &[f64], ff: &[f64]) -> Vec<f64> {
+    measured
+        .iter()
+        .zip(targets)
+        .zip(ff)
+        .map(|((m, t), f)| f + SERVO_GAIN * (t - m))
+        .collect()
 }
 
 /// A standing posture: arms down, knees slightly bent, feet flat.
@@ -785,12 +793,9 @@ mod tests {
             let m = model(t);
             let q = standing_angles(&m);
             let mut sim = Sim::new(&m, SimSettings::default(), &Start::upright(q.clone())).unwrap();
-            let zero = vec![0.0; q.len()];
             let z0 = sim.perceive().torso_position_m[2];
             for _ in 0..500 {
-                let p = sim.perceive();
-                let cmd = sim.servo(&p.joint_angles_rad, &q, &zero);
-                let p = sim.step(&cmd).unwrap();
+                let p = sim.hold(&q).unwrap();
                 assert!(!fallen(&p));
                 assert!(
                     (p.torso_position_m[2] - z0).abs() < 0.01,
@@ -814,12 +819,9 @@ mod tests {
             roll_rad: 0.0,
         };
         let mut sim = Sim::new(&m, SimSettings::default(), &start).unwrap();
-        let zero = vec![0.0; q.len()];
         let mut fell_at = None;
         for _ in 0..250 {
-            let p = sim.perceive();
-            let cmd = sim.servo(&p.joint_angles_rad, &q, &zero);
-            let p = sim.step(&cmd).unwrap();
+            let p = sim.hold(&q).unwrap();
             if fallen(&p) {
                 fell_at = Some(p.time_s);
                 break;
@@ -839,7 +841,7 @@ mod tests {
                 let t = f64::from(k) * CYCLE_S;
                 let target: Vec<f64> = q.iter().map(|a| a + 0.2 * (5.0 * t).sin()).collect();
                 let ff = vec![0.0; q.len()];
-                let cmd = sim.servo(&p.joint_angles_rad, &target, &ff);
+                let cmd = servo(&p.joint_angles_rad, &target, &ff);
                 sim.step(&cmd).unwrap();
             }
             sim.state_bits()

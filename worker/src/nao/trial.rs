@@ -90,7 +90,7 @@ pub fn run_observed(
     let gait = Gait::new(&model, walk, duration_s);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let rest = standing_angles(&model);
-    let q0 = gait.targets(&model, &rest, 0.0);
+    let q0 = gait.targets(&rest, 0.0);
     let jitter = INIT_JITTER_DEG.to_radians();
     let start: Vec<f64> = q0
         .iter()
@@ -106,7 +106,7 @@ pub fn run_observed(
     let mut fall_time_s = None;
     for k in 0..cycles {
         let t = k as f64 * CYCLE_S;
-        let q_next = gait.targets(&model, &rest, t + CYCLE_S);
+        let q_next = gait.targets(&rest, t + CYCLE_S);
         let cmd: Vec<f64> = perception
             .joint_angles_rad
             .iter()

@@ -180,6 +180,26 @@ pub struct Gait {
     steps: Vec<f64>,
     grid_start: f64,
     com: Vec<[f64; 2]>,
+    /// For each model joint, the (side, le index 0..6) it takes from the IK.
+    leg_slots: Vec<Option<(usize, usize)>>,
+}
+
+/// Which IK output drives each model joint: `lle1`..`lle6` → (0, 0..6),
+/// `rle1`..`rle6` → (1, 0..6), anything else (arms, head, toes) none.
+fn leg_slots(model: &NaoModel) -> Vec<Option<(usize, usize)>> {
+    model
+        .joints
+        .iter()
+        .map(|joint| {
+            let side = match joint.name.as_bytes().first() {
+                Some(b'l') => 0,
+                Some(b'r') => 1,
+                _ => return None,
+            };
+            let i: usize = joint.name.get(1..)?.strip_prefix("le")?.parse().ok()?;
+            (1..=6).contains(&i).then_some((side, i - 1))
+        })
+        .collect()
 }
 
 impl Gait {
@@ -209,6 +229,7 @@ impl Gait {
             steps,
             grid_start: 0.0,
             com: Vec::new(),
+            leg_slots: leg_slots(model),
         };
         g.plan_com(duration_s, tc);
         g
@@ -335,27 +356,15 @@ impl Gait {
         out
     }
 
-    /// Targets for every model joint at time t (arms and head at their rest posture).
+    /// Targets for every model joint at time t (arms and head at their rest
+    /// posture `rest`, one angle per joint of the model the gait was planned for).
     #[must_use]
-    pub fn targets(&self, model: &NaoModel, rest: &[f64], t: f64) -> Vec<f64> {
+    pub fn targets(&self, rest: &[f64], t: f64) -> Vec<f64> {
         let legs = self.leg_targets(t);
         let mut q = rest.to_vec();
-        for (j, joint) in model.joints.iter().enumerate() {
-            let side = match joint.name.as_bytes().first() {
-                Some(b'l') => 0,
-                Some(b'r') => 1,
-                _ => continue,
-            };
-            if let Some(k) = joint
-                .name
-                .strip_prefix(['l', 'r'])
-                .and_then(|s| s.strip_prefix("le"))
-            {
-                if let Ok(i) = k.parse::<usize>() {
-                    if (1..=6).contains(&i) {
-                        q[j] = legs[side][i - 1];
-                    }
-                }
+        for (qj, slot) in q.iter_mut().zip(&self.leg_slots) {
+            if let Some((side, i)) = slot {
+                *qj = legs[*side][*i];
             }
         }
         q
