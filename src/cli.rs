@@ -77,6 +77,17 @@ enum Command {
     /// Benchmarks: `bench clop` (regret and cost), `bench sim` (physics speed).
     #[command(subcommand)]
     Bench(BenchCommand),
+    /// Print a run's decided history H (iteration, p, s, mx, my, ex, ey, decision, best).
+    History {
+        /// The run directory.
+        dir: PathBuf,
+        /// An array of JSON rows.
+        #[arg(long)]
+        json: bool,
+        /// Comma-separated values with a header line.
+        #[arg(long)]
+        csv: bool,
+    },
     /// Validate an experiment file and print it as parsed.
     Check {
         /// The experiment file (TOML).
@@ -98,6 +109,7 @@ pub fn dispatch(cli: Cli) -> Result<(), Failure> {
             slots,
             min_trial_ms,
         } => crate::farm::worker(&net, slots, min_trial_ms),
+        Command::History { dir, json, csv } => crate::history::history(&dir, json, csv),
         Command::Bench(b) => crate::benches::bench(b),
         Command::Stand(a) => crate::robot::stand(&a),
         Command::Trial(a) => crate::robot::trial(&a),
@@ -141,6 +153,16 @@ pub enum BenchCommand {
     Clop(crate::benches::ClopBenchArgs),
     /// The rebuilt NAO: real-time factor and physics steps/s, standing and walking, per settings.
     Sim(crate::robot::SimBenchArgs),
+}
+
+/// Writes `text` to stdout; a closed pipe (`| head`) ends quietly.
+pub fn emit(text: &str) -> Result<(), Failure> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(Failure::Job(e.into())),
+        _ => Ok(()),
+    }
 }
 
 /// Reads and validates an experiment file (a usage error when it is bad).

@@ -8,7 +8,10 @@ use coordinator::{
     run::{load_history, Run},
     service::{self, Ended, Event, ServiceConfig},
 };
-use protocol::{experiment::TrialModel, wire::WireMessage};
+use protocol::{
+    experiment::TrialModel,
+    wire::{RunStatus, WireMessage},
+};
 
 use crate::{
     cli::{load_experiment, Failure, JobArgs},
@@ -126,7 +129,49 @@ fn print_event(e: &Event, json: bool) {
     }
 }
 
-fn summary(run_dir: &std::path::Path, ended: &Ended) -> Result<(), Failure> {
+/// The two answers of the paper: Optim.1 (ν′, the best-first agent) and
+/// Optim.2 (CLOP's mean, the best-average agent), from the last status.
+fn print_optima(status: &RunStatus, json: bool) {
+    if json {
+        let line = serde_json::json!({
+            "event": "finished",
+            "status": serde_json::from_str::<serde_json::Value>(&status.to_json()).unwrap_or_default(),
+        });
+        println!("{line}");
+        return;
+    }
+    let params = |p: &[(String, f64)]| {
+        p.iter()
+            .map(|(n, v)| format!("{n} = {v:.4}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    match &status.best {
+        Some(b) => println!(
+            "Optim.1 (nu', iteration {}): s {:.2} mx {} my {} ex {}\n  {}",
+            b.iteration,
+            b.stats.s,
+            b.stats.mx.map_or("-".into(), |v| format!("{v:.3} m")),
+            b.stats.my.map_or("-".into(), |v| format!("{v:.3} m")),
+            b.stats.ex.map_or("-".into(), |v| format!("{v:.3} m")),
+            params(&b.params)
+        ),
+        None => println!("Optim.1: no parameter set was accepted"),
+    }
+    println!("Optim.2 (CLOP's mean):\n  {}", params(&status.optim2));
+}
+
+fn summary(
+    run_dir: &std::path::Path,
+    ended: &Ended,
+    last: Option<&RunStatus>,
+    json: bool,
+) -> Result<(), Failure> {
+    if let Some(status) = last {
+        if matches!(ended, Ended::Finished(_)) {
+            print_optima(status, json);
+        }
+    }
     match ended {
         Ended::Finished(c) => {
             eprintln!(
@@ -160,9 +205,13 @@ pub fn coordinator(job: &JobArgs, net: &NetArgs, json: bool) -> Result<(), Failu
         let shutdown = signals();
         let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel();
         let printer = tokio::spawn(async move {
+            let mut last = None;
             while let Some(e) = rx.recv().await {
                 print_event(&e, json);
+                let Event::Decided(_, status) = e;
+                last = Some(status);
             }
+            last
         });
         let ended = service::serve(
             session.clone(),
@@ -174,9 +223,9 @@ pub fn coordinator(job: &JobArgs, net: &NetArgs, json: bool) -> Result<(), Failu
         )
         .await
         .map_err(|e| Failure::Job(e.into()))?;
-        let _ = printer.await;
+        let last = printer.await.ok().flatten();
         let _ = session.close().await;
-        summary(&job.out, &ended)
+        summary(&job.out, &ended, last.as_ref(), json)
     })
 }
 
@@ -264,9 +313,13 @@ pub fn run(job: &JobArgs, workers: Option<u32>, json: bool) -> Result<(), Failur
         }
         let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel();
         let printer = tokio::spawn(async move {
+            let mut last = None;
             while let Some(e) = rx.recv().await {
                 print_event(&e, json);
+                let Event::Decided(_, status) = e;
+                last = Some(status);
             }
+            last
         });
         let ended = service::serve(
             session.clone(),
@@ -277,7 +330,7 @@ pub fn run(job: &JobArgs, workers: Option<u32>, json: bool) -> Result<(), Failur
             Some(tx),
         )
         .await;
-        let _ = printer.await;
+        let last = printer.await.ok().flatten();
         for ws in &worker_sessions {
             let _ = ws.close().await;
         }
@@ -286,6 +339,6 @@ pub fn run(job: &JobArgs, workers: Option<u32>, json: bool) -> Result<(), Failur
         }
         let _ = session.close().await;
         let ended = ended.map_err(|e| Failure::Job(e.into()))?;
-        summary(&job.out, &ended)
+        summary(&job.out, &ended, last.as_ref(), json)
     })
 }

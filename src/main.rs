@@ -3,6 +3,7 @@
 mod benches;
 mod cli;
 mod farm;
+mod history;
 mod net;
 mod robot;
 

@@ -336,16 +336,8 @@ n_mcmc = 100
         let out = farm_run("three", 3, 20);
         let records = journal(&out);
         assert_every_trial_once(&records, 20);
-        let workers: std::collections::BTreeSet<String> = records
-            .iter()
-            .filter_map(|r| {
-                if let Record::Outcome { result, .. } = r {
-                    Some(result.worker.clone())
-                } else {
-                    None
-                }
-            })
-            .collect();
+        let workers: std::collections::BTreeSet<String> =
+            records.iter().filter_map(outcome_worker).collect();
         assert!(
             workers.len() >= 2,
             "trials spread over workers: {workers:?}"
@@ -403,10 +395,13 @@ n_mcmc = 100
         let port = free_port();
         let out = dir.join("run");
         let mut ws: Vec<Child> = (0..2).map(|_| worker(port, 2, 10)).collect();
-        let mut c = Coordinator::start(&exp, &out, port, 30.0);
-        c.wait_decided(5);
-        c.child.kill().unwrap();
-        let _ = c.child.wait();
+        // SIGKILL at several points: after 3 new decisions, 6 more, 5 more.
+        for n in [3, 6, 5] {
+            let mut c = Coordinator::start(&exp, &out, port, 30.0);
+            c.wait_decided(n);
+            c.child.kill().unwrap();
+            let _ = c.child.wait();
+        }
         let mut c = Coordinator::start(&exp, &out, port, 30.0);
         let status = c.wait_exit();
         kill_all(&mut ws);
@@ -414,6 +409,50 @@ n_mcmc = 100
         let records = journal(&out);
         assert_every_trial_once(&records, 20);
         assert_eq!(bits(&decided(&records)), bits(&reference));
+    }
+
+    #[test]
+    fn a_worker_that_joins_mid_run_gets_work() {
+        let dir = scratch("join");
+        let exp = experiment(&dir, 16);
+        let port = free_port();
+        let out = dir.join("run");
+        let mut c = Coordinator::start(&exp, &out, port, 30.0);
+        let mut ws = vec![worker(port, 1, 25)];
+        c.wait_decided(3);
+        // Read, never open: opening would repair a record the coordinator is writing.
+        let path = Journal::path_in(&out);
+        let before = Journal::parse(&path, &std::fs::read(&path).unwrap())
+            .unwrap()
+            .records
+            .len();
+        ws.push(worker(port, 1, 25));
+        let status = c.wait_exit();
+        kill_all(&mut ws);
+        assert!(status.success(), "{:?}", c.seen);
+        let records = journal(&out);
+        assert_every_trial_once(&records, 16);
+        let early: std::collections::BTreeSet<String> = records[..before]
+            .iter()
+            .filter_map(outcome_worker)
+            .collect();
+        let late: std::collections::BTreeSet<String> = records[before..]
+            .iter()
+            .filter_map(outcome_worker)
+            .collect();
+        assert_eq!(early.len(), 1, "one worker before the join: {early:?}");
+        assert!(
+            late.difference(&early).count() == 1,
+            "the joiner ran trials after it joined: before {early:?}, after {late:?}"
+        );
+    }
+
+    fn outcome_worker(r: &Record) -> Option<String> {
+        if let Record::Outcome { result, .. } = r {
+            Some(result.worker.clone())
+        } else {
+            None
+        }
     }
 
     #[test]
@@ -525,6 +564,22 @@ n_mcmc = 100
     }
 }
 
+/// The JSON lines of `run --json` / `coordinator --json`, split into the
+/// decided iterations and the final `finished` line.
+fn events(stdout: &[u8]) -> (Vec<serde_json::Value>, Option<serde_json::Value>) {
+    let mut decided = Vec::new();
+    let mut finished = None;
+    for l in String::from_utf8_lossy(stdout).lines() {
+        let v: serde_json::Value = serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}"));
+        match v["event"].as_str() {
+            Some("decided") => decided.push(v),
+            Some("finished") => finished = Some(v),
+            other => panic!("unknown event {other:?}: {l}"),
+        }
+    }
+    (decided, finished)
+}
+
 #[test]
 fn run_completes_a_synthetic_experiment_in_one_process() {
     let dir = scratch("run");
@@ -535,14 +590,109 @@ fn run_completes_a_synthetic_experiment_in_one_process() {
             .arg("--out")
             .arg(dir.join("run")),
     );
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let lines: Vec<serde_json::Value> = stdout
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
+    let (lines, finished) = events(&out.stdout);
     assert_eq!(lines.len(), 8);
     assert_eq!(lines[7]["status"]["decided"], 8);
     assert_eq!(lines[7]["status"]["finished"], true);
+    let finished = finished.expect("a finished line with the optima");
+    let best = &finished["status"]["best"];
+    assert!(best["iteration"].is_u64(), "Optim.1: {finished}");
+    assert_eq!(
+        finished["status"]["optim2"].as_array().map(Vec::len),
+        Some(5)
+    );
+
+    // `history` exports the same H, with ν′ flagged once.
+    let h = succeed(naofarm().arg("history").arg(dir.join("run")).arg("--json"));
+    let rows: Vec<serde_json::Value> = serde_json::from_slice(&h.stdout).unwrap();
+    assert_eq!(rows.len(), 8);
+    for (row, line) in rows.iter().zip(&lines) {
+        assert_eq!(row["iteration"], line["iteration"]);
+        assert_eq!(row["mx"], line["mx"]);
+        assert!(["ACCEPT", "EQUIVALENT", "REJECT"].contains(&row["decision"].as_str().unwrap()));
+        assert_eq!(row["params"].as_object().map(|o| o.len()), Some(5));
+    }
+    let flagged: Vec<&serde_json::Value> = rows.iter().filter(|r| r["best"] == true).collect();
+    assert_eq!(flagged.len(), 1);
+    assert_eq!(flagged[0]["iteration"], best["iteration"]);
+    let csv = succeed(naofarm().arg("history").arg(dir.join("run")).arg("--csv"));
+    let csv = String::from_utf8_lossy(&csv.stdout);
+    assert_eq!(csv.lines().count(), 9, "a header and 8 rows");
+    assert!(csv.starts_with("iteration,ThighRelHip2_Z,"));
+    let missing = naofarm()
+        .arg("history")
+        .arg(dir.join("nowhere"))
+        .output()
+        .unwrap();
+    assert_eq!(missing.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&missing.stderr).contains("journal"));
+}
+
+#[test]
+fn a_torn_journal_resumes_and_a_corrupt_one_is_refused_with_its_offset() {
+    let dir = scratch("journal-damage");
+    let exp = root().join("experiments/synthetic.toml");
+    let run = |out: &std::path::Path| {
+        naofarm()
+            .args(["run", "--json", "--workers", "1", "--iterations", "6"])
+            .arg(&exp)
+            .arg("--out")
+            .arg(out)
+            .output()
+            .unwrap()
+    };
+    let reference = dir.join("reference");
+    assert!(run(&reference).status.success());
+    let want = succeed(naofarm().arg("history").arg(&reference).arg("--csv")).stdout;
+    let journal = reference.join("journal.nfj");
+    let bytes = std::fs::read(&journal).unwrap();
+
+    // A torn tail (a crash mid-write): dropped with a warning, the run resumes.
+    let torn = dir.join("torn");
+    std::fs::create_dir_all(&torn).unwrap();
+    std::fs::write(torn.join("journal.nfj"), &bytes[..bytes.len() * 2 / 3 - 3]).unwrap();
+    let out = run(&torn);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let got = succeed(naofarm().arg("history").arg(&torn).arg("--csv")).stdout;
+    assert_eq!(
+        got, want,
+        "the resumed history equals the uninterrupted one"
+    );
+
+    // A damaged byte in the middle: refused, naming the offset; the file is kept as it was.
+    let corrupt = dir.join("corrupt");
+    std::fs::create_dir_all(&corrupt).unwrap();
+    let mut damaged = bytes.clone();
+    let middle = damaged.len() / 2;
+    damaged[middle] ^= 0x5a;
+    std::fs::write(corrupt.join("journal.nfj"), &damaged).unwrap();
+    let out = run(&corrupt);
+    assert_eq!(out.status.code(), Some(1), "{out:?}");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("corrupt record at byte offset"), "{err}");
+    assert_eq!(std::fs::read(corrupt.join("journal.nfj")).unwrap(), damaged);
+}
+
+#[test]
+fn the_main_job_runs_five_nao_iterations() {
+    let dir = scratch("main-job");
+    let out = succeed(
+        naofarm()
+            .args(["run", "--json", "--iterations", "5"])
+            .arg(root().join("experiments/physical-technical.toml"))
+            .arg("--out")
+            .arg(dir.join("run")),
+    );
+    let (lines, finished) = events(&out.stdout);
+    assert_eq!(lines.len(), 5);
+    assert_eq!(lines[0]["params"][0], -0.04, "the expert set first");
+    let finished = finished.expect("finished line");
+    assert_eq!(finished["status"]["decided"], 5);
+    assert_eq!(finished["status"]["finished"], true);
 }
 
 #[test]
@@ -652,10 +802,10 @@ fn the_nao_farm_gives_the_same_history_with_one_or_two_workers() {
                 .arg("--out")
                 .arg(&out_dir),
         );
-        String::from_utf8_lossy(&out.stdout)
-            .lines()
-            .map(|l| {
-                let v: serde_json::Value = serde_json::from_str(l).unwrap();
+        events(&out.stdout)
+            .0
+            .into_iter()
+            .map(|v| {
                 (
                     v["iteration"].clone(),
                     v["decision"].clone(),

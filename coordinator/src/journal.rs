@@ -58,12 +58,12 @@ pub enum Record {
 #[derive(Debug, thiserror::Error)]
 pub enum JournalError {
     /// File-system error.
-    #[error("journal {path}: {source}")]
+    #[error("journal {path}: {cause}")]
     Io {
         /// The file.
         path: PathBuf,
         /// The cause.
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// A record in the middle of the file is damaged.
     #[error("journal {path}: corrupt record at byte offset {offset}: {why}")]
@@ -109,9 +109,9 @@ impl Journal {
     /// Creates a new journal (the file must not exist) and writes its header.
     pub fn create(dir: &Path, header: &Record) -> Result<Self, JournalError> {
         let path = Self::path_in(dir);
-        let io = |source| JournalError::Io {
+        let io = |cause| JournalError::Io {
             path: path.clone(),
-            source,
+            cause,
         };
         std::fs::create_dir_all(dir).map_err(io)?;
         let file = OpenOptions::new()
@@ -130,9 +130,9 @@ impl Journal {
     /// Opens an existing journal, reads every good record, truncates a torn tail.
     pub fn open(dir: &Path) -> Result<(Self, Replay), JournalError> {
         let path = Self::path_in(dir);
-        let io = |source| JournalError::Io {
+        let io = |cause| JournalError::Io {
             path: path.clone(),
-            source,
+            cause,
         };
         let mut file = OpenOptions::new()
             .read(true)
@@ -222,7 +222,7 @@ impl Journal {
                 bincode::serde::encode_to_vec(rec, bincode::config::standard()).map_err(|e| {
                     JournalError::Io {
                         path: self.path.clone(),
-                        source: std::io::Error::other(e.to_string()),
+                        cause: std::io::Error::other(e.to_string()),
                     }
                 })?;
             let len = u32::try_from(payload.len()).unwrap_or(u32::MAX);
@@ -230,9 +230,9 @@ impl Journal {
             buf.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
             buf.extend_from_slice(&payload);
         }
-        let io = |source| JournalError::Io {
+        let io = |cause| JournalError::Io {
             path: self.path.clone(),
-            source,
+            cause,
         };
         self.file.write_all(&buf).map_err(io)?;
         self.file.sync_data().map_err(io)

@@ -58,6 +58,14 @@ pub enum RunError {
     /// An outcome was refused (unknown iteration, wrong seed, NaN…).
     #[error(transparent)]
     Refused(#[from] OutcomeError),
+    /// The journal's header holds an experiment this build cannot read.
+    #[error("{dir}: the journal's experiment does not parse: {why}")]
+    BadHeader {
+        /// The run directory.
+        dir: String,
+        /// The parser's message.
+        why: String,
+    },
 }
 
 /// A run: the loop plus its journal.
@@ -311,9 +319,9 @@ impl Run {
 /// Reads an earlier run's H and ν′ for `--from RUN_DIR` (its own imports included).
 pub fn load_history(dir: &Path) -> Result<Imported, RunError> {
     let path = Journal::path_in(dir);
-    let bytes = std::fs::read(&path).map_err(|source| JournalError::Io {
+    let bytes = std::fs::read(&path).map_err(|cause| JournalError::Io {
         path: path.clone(),
-        source,
+        cause,
     })?;
     let replay = Journal::parse(&path, &bytes)?;
     let mut out = Imported::default();
@@ -330,6 +338,39 @@ pub fn load_history(dir: &Path) -> Result<Imported, RunError> {
         }
     }
     Ok(out)
+}
+
+/// A finished or running run as its journal tells it: the effective experiment
+/// and the decided history (for `naofarm history`). Reading never writes.
+pub fn read_run(dir: &Path) -> Result<(Experiment, Vec<DecidedIteration>), RunError> {
+    let path = Journal::path_in(dir);
+    let bytes = std::fs::read(&path).map_err(|cause| JournalError::Io {
+        path: path.clone(),
+        cause,
+    })?;
+    let replay = Journal::parse(&path, &bytes)?;
+    let mut exp = None;
+    let mut decided = Vec::new();
+    for rec in replay.records {
+        match rec {
+            Record::Header {
+                experiment_json, ..
+            } => {
+                exp = Some(
+                    serde_json::from_str::<Experiment>(&experiment_json).map_err(|e| {
+                        RunError::BadHeader {
+                            dir: dir.display().to_string(),
+                            why: e.to_string(),
+                        }
+                    })?,
+                );
+            }
+            Record::Decided(d) => decided.push(d),
+            Record::Opened(_) | Record::Outcome { .. } => {}
+        }
+    }
+    let exp = exp.ok_or(JournalError::NoHeader { path })?;
+    Ok((exp, decided))
 }
 
 /// Runs every effect to completion in this thread with `trial` (tests, local tools).
@@ -547,6 +588,79 @@ n_mcmc = 200
                 bits(&decided),
                 bits(&reference),
                 "stopped after {stop_after}"
+            );
+        }
+    }
+
+    /// Experiment 2's file with the synthetic model and `iterations`, `depth`.
+    fn physical_technical(iterations: u64, depth: u32) -> (Experiment, String) {
+        let text = include_str!("../../experiments/physical-technical.toml")
+            .replace("model = \"nao\"", "model = \"synthetic\"")
+            .replace("iterations = 500", &format!("iterations = {iterations}"))
+            .replace("pipeline_depth = 4", &format!("pipeline_depth = {depth}"));
+        (Experiment::from_toml(&text).unwrap(), text)
+    }
+
+    fn run_to_end(name: &str, exp: Experiment, text: &str) -> Run {
+        let dir = tmp(name);
+        let (mut run, effects) = Run::open(&dir, exp, text, None).unwrap();
+        drive_local(&mut run, effects, &synthetic, &mut |_| {}).unwrap();
+        assert!(run.evolve().finished());
+        run
+    }
+
+    #[test]
+    fn two_hundred_synthetic_iterations_converge() {
+        let (exp, text) = physical_technical(200, 4);
+        let run = run_to_end("converge", exp, &text);
+        let ev = run.evolve();
+        let h = ev.history();
+        assert_eq!(h.len(), 200);
+        let kept = |part: &[DecidedIteration]| {
+            part.iter()
+                .filter(|d| d.decision != protocol::Decision::Reject)
+                .count()
+        };
+        let (first, last) = (kept(&h[..50]), kept(&h[150..]));
+        assert!(
+            last > first,
+            "ACCEPT+EQUIVALENT share must grow: {first}/50 in the first quarter, {last}/50 in the last"
+        );
+        // The synthetic optimum (worker::synthetic::SHAPE; the step length's
+        // best lies where speed saturates before the balance penalty, ~0.125 m).
+        let optimum = [-0.038, 0.80, 0.014, 0.038, 0.125];
+        let ranges = [0.05, 0.35, 0.029, 0.045, 0.13];
+        let off = |p: &[f64]| -> f64 {
+            p.iter()
+                .zip(optimum.iter().zip(ranges))
+                .map(|(v, (o, r))| ((v - o) / r).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        };
+        let expert = off(&h[0].params);
+        let (_, nu_p, _) = ev.best().expect("a best exists");
+        let optim1 = off(nu_p);
+        let optim2 = off(&ev.optim2());
+        eprintln!(
+            "kept {first}/50 then {last}/50; distance expert {expert:.3}, Optim.1 {optim1:.3}, Optim.2 {optim2:.3}"
+        );
+        assert!(
+            optim1 < 0.6 * expert && optim2 < 0.6 * expert,
+            "distance to the optimum in range units: expert {expert:.3}, Optim.1 {optim1:.3}, Optim.2 {optim2:.3}"
+        );
+    }
+
+    #[test]
+    fn pipeline_depths_one_and_four_are_each_reproducible() {
+        for depth in [1, 4] {
+            let (exp, text) = physical_technical(30, depth);
+            let a = run_to_end(&format!("depth{depth}-a"), exp.clone(), &text);
+            let b = run_to_end(&format!("depth{depth}-b"), exp, &text);
+            assert_eq!(a.evolve().history().len(), 30);
+            assert_eq!(
+                bits(a.evolve().history()),
+                bits(b.evolve().history()),
+                "D = {depth}"
             );
         }
     }
