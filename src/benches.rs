@@ -1,4 +1,5 @@
-//! `naofarm bench clop`: the CLOP regret table and the cost per step.
+//! `naofarm bench clop` (the CLOP regret table and the cost per step) and
+//! `naofarm bench farm` (throughput of real coordinator and worker processes).
 
 use anyhow::anyhow;
 use clap::Args;
@@ -39,6 +40,7 @@ pub fn bench(cmd: BenchCommand) -> Result<(), Failure> {
     match cmd {
         BenchCommand::Clop(a) => clop(&a),
         BenchCommand::Sim(a) => crate::robot::bench_sim(&a),
+        BenchCommand::Farm(a) => farm(&a),
     }
 }
 
@@ -107,4 +109,170 @@ fn clop(a: &ClopBenchArgs) -> Result<(), Failure> {
         }
     }
     Ok(())
+}
+
+/// Arguments of `bench farm`.
+#[derive(Args, Debug)]
+pub struct FarmBenchArgs {
+    /// Worker processes (one slot each) for the zero-cost synthetic runs.
+    #[arg(long, default_value = "1,4,16", value_delimiter = ',')]
+    workers: Vec<u32>,
+    /// Iterations of each synthetic run (10 trials each, pipeline depth 4).
+    #[arg(long, default_value_t = 150)]
+    iterations: u64,
+    /// Iterations of the NAO runs with 1 and 2 workers (0: skip them).
+    #[arg(long, default_value_t = 4)]
+    nao_iterations: u64,
+    /// The experiment whose space and constants the runs use (the model is set per case).
+    #[arg(long, default_value = "experiments/physical-technical.toml")]
+    experiment: std::path::PathBuf,
+    /// Machine-readable output.
+    #[arg(long)]
+    json: bool,
+}
+
+/// One measured farm run.
+#[derive(Debug, serde::Serialize)]
+struct FarmRow {
+    model: &'static str,
+    workers: u32,
+    trials: u64,
+    wall_s: f64,
+    trials_per_s: f64,
+    coordinator_cpu_s: Option<f64>,
+    coordinator_cpu_per_trial_ms: Option<f64>,
+}
+
+/// Kills the worker processes however the bench ends.
+struct Workers(Vec<std::process::Child>);
+
+impl Drop for Workers {
+    fn drop(&mut self) {
+        for c in &mut self.0 {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+/// Runs `naofarm coordinator` with `workers` worker processes on a free
+/// loopback port and reads its final JSON line.
+fn farm_case(
+    experiment: &std::path::Path,
+    model: &'static str,
+    workers: u32,
+    iterations: u64,
+) -> anyhow::Result<FarmRow> {
+    use std::process::{Command, Stdio};
+    let exe = std::env::current_exe()?;
+    let port = crate::net::free_loopback_port()?;
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let out = std::env::temp_dir().join(format!(
+        "naofarm-bench-farm-{}-{model}-{workers}",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_dir_all(&out);
+    let mut pool = Workers(Vec::new());
+    for _ in 0..workers {
+        pool.0.push(
+            Command::new(&exe)
+                .args(["worker", "--slots", "1", "--connect", &endpoint])
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()?,
+        );
+    }
+    let started = std::time::Instant::now();
+    let done = Command::new(&exe)
+        .arg("coordinator")
+        .arg(experiment)
+        .arg("--out")
+        .arg(&out)
+        .args(["--json", "--model", model, "--listen", &endpoint])
+        .args(["--iterations", &iterations.to_string()])
+        .output()?;
+    let wall_s = started.elapsed().as_secs_f64();
+    drop(pool);
+    let _ = std::fs::remove_dir_all(&out);
+    if !done.status.success() {
+        return Err(anyhow!(
+            "the coordinator failed ({}): {}",
+            done.status,
+            String::from_utf8_lossy(&done.stderr)
+        ));
+    }
+    let stdout = String::from_utf8_lossy(&done.stdout);
+    let finished: serde_json::Value = stdout
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .find(|v| v["event"] == "finished")
+        .ok_or_else(|| anyhow!("the coordinator printed no final line"))?;
+    let trials = finished["accepted"].as_u64().unwrap_or(0);
+    let cpu = finished["cpu_s"].as_f64();
+    #[allow(clippy::cast_precision_loss)]
+    let per_trial = |x: f64| if trials > 0 { x / trials as f64 } else { 0.0 };
+    Ok(FarmRow {
+        model,
+        workers,
+        trials,
+        wall_s,
+        trials_per_s: finished["status"]["trials_per_s"].as_f64().unwrap_or(0.0),
+        coordinator_cpu_s: cpu,
+        coordinator_cpu_per_trial_ms: cpu.map(|c| per_trial(c) * 1e3),
+    })
+}
+
+fn farm(a: &FarmBenchArgs) -> Result<(), Failure> {
+    if a.workers.iter().any(|&w| w == 0 || w > 256) || a.iterations == 0 {
+        return Err(Failure::Usage(anyhow!(
+            "--workers must be in 1..=256 and --iterations at least 1"
+        )));
+    }
+    // Refuse a bad file before starting any process.
+    crate::cli::load_experiment(&a.experiment)?;
+    let exp = &a.experiment;
+    let mut rows = Vec::new();
+    for &w in &a.workers {
+        eprintln!("synthetic, {w} worker(s)…");
+        rows.push(farm_case(exp, "synthetic", w, a.iterations).map_err(Failure::Job)?);
+    }
+    if a.nao_iterations > 0 {
+        for w in [1, 2] {
+            eprintln!("nao, {w} worker(s)…");
+            rows.push(farm_case(exp, "nao", w, a.nao_iterations).map_err(Failure::Job)?);
+        }
+    }
+    if a.json {
+        let text = serde_json::to_string_pretty(&rows).map_err(|e| Failure::Job(e.into()))?;
+        return crate::cli::emit(&format!("{text}\n"));
+    }
+    let mut out = format!(
+        "{:<10} {:>7} {:>7} {:>8} {:>10} {:>16} {:>22}\n",
+        "model", "workers", "trials", "wall s", "trials/s", "coord. CPU s", "coord. CPU ms/trial"
+    );
+    let f = |v: Option<f64>, p: usize| v.map_or("-".to_string(), |v| format!("{v:.p$}"));
+    for r in &rows {
+        out += &format!(
+            "{:<10} {:>7} {:>7} {:>8.2} {:>10.1} {:>16} {:>22}\n",
+            r.model,
+            r.workers,
+            r.trials,
+            r.wall_s,
+            r.trials_per_s,
+            f(r.coordinator_cpu_s, 2),
+            f(r.coordinator_cpu_per_trial_ms, 3)
+        );
+    }
+    let nao: Vec<&FarmRow> = rows.iter().filter(|r| r.model == "nao").collect();
+    if let [one, two] = nao.as_slice() {
+        if one.trials_per_s > 0.0 {
+            out += &format!(
+                "NAO speed-up from 1 to 2 workers: {:.2}x ({:.1} -> {:.1} trials/s)\n",
+                two.trials_per_s / one.trials_per_s,
+                one.trials_per_s,
+                two.trials_per_s
+            );
+        }
+    }
+    crate::cli::emit(&out)
 }

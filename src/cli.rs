@@ -153,6 +153,8 @@ pub enum BenchCommand {
     Clop(crate::benches::ClopBenchArgs),
     /// The rebuilt NAO: real-time factor and physics steps/s, standing and walking, per settings.
     Sim(crate::robot::SimBenchArgs),
+    /// The farm: trials/s and coordinator CPU per trial through real processes on loopback.
+    Farm(crate::benches::FarmBenchArgs),
 }
 
 /// Writes `text` to stdout; a closed pipe (`| head`) ends quietly.

@@ -129,13 +129,31 @@ fn print_event(e: &Event, json: bool) {
     }
 }
 
+/// CPU time (user + system) this process has used, from `/proc/self/stat`
+/// (Linux; clock ticks of 1/100 s, the kernel's USER_HZ). `None` elsewhere.
+pub fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (which may hold spaces) closed by ')'.
+    let rest = stat.rsplit_once(')')?.1;
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    // utime and stime are fields 14 and 15 of stat(5); `rest` starts at field 3.
+    let utime: f64 = fields.get(11)?.parse().ok()?;
+    let stime: f64 = fields.get(12)?.parse().ok()?;
+    Some((utime + stime) / 100.0)
+}
+
 /// The two answers of the paper: Optim.1 (ν′, the best-first agent) and
 /// Optim.2 (CLOP's mean, the best-average agent), from the last status.
-fn print_optima(status: &RunStatus, json: bool) {
+fn print_optima(status: &RunStatus, counters: &service::Counters, json: bool) {
     if json {
         let line = serde_json::json!({
             "event": "finished",
             "status": serde_json::from_str::<serde_json::Value>(&status.to_json()).unwrap_or_default(),
+            "accepted": counters.accepted,
+            "duplicates": counters.duplicates,
+            "refused": counters.refused,
+            "redispatched": counters.redispatched,
+            "cpu_s": process_cpu_seconds(),
         });
         println!("{line}");
         return;
@@ -167,10 +185,8 @@ fn summary(
     last: Option<&RunStatus>,
     json: bool,
 ) -> Result<(), Failure> {
-    if let Some(status) = last {
-        if matches!(ended, Ended::Finished(_)) {
-            print_optima(status, json);
-        }
+    if let (Some(status), Ended::Finished(c)) = (last, ended) {
+        print_optima(status, c, json);
     }
     match ended {
         Ended::Finished(c) => {
