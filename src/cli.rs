@@ -77,6 +77,8 @@ enum Command {
     /// Benchmarks: `bench clop` (regret and cost), `bench sim` (physics speed).
     #[command(subcommand)]
     Bench(BenchCommand),
+    /// Follow a run from any machine (live view or JSON lines); without RUN, list the runs.
+    Watch(crate::watch::WatchArgs),
     /// Print a run's decided history H (iteration, p, s, mx, my, ex, ey, decision, best).
     History {
         /// The run directory.
@@ -109,6 +111,7 @@ pub fn dispatch(cli: Cli) -> Result<(), Failure> {
             slots,
             min_trial_ms,
         } => crate::farm::worker(&net, slots, min_trial_ms),
+        Command::Watch(a) => crate::watch::watch(&a),
         Command::History { dir, json, csv } => crate::history::history(&dir, json, csv),
         Command::Bench(b) => crate::benches::bench(b),
         Command::Stand(a) => crate::robot::stand(&a),

@@ -8,14 +8,12 @@ use coordinator::{
     run::{load_history, Run},
     service::{self, Ended, Event, ServiceConfig},
 };
-use protocol::{
-    experiment::TrialModel,
-    wire::{RunStatus, WireMessage},
-};
+use protocol::{experiment::TrialModel, wire::RunStatus};
 
 use crate::{
     cli::{load_experiment, Failure, JobArgs},
     net::{free_loopback_port, NetArgs},
+    view::View,
 };
 
 fn runtime() -> Result<tokio::runtime::Runtime, Failure> {
@@ -94,39 +92,30 @@ fn service_config(job: &JobArgs, prefix: &str) -> ServiceConfig {
     }
 }
 
-fn print_event(e: &Event, json: bool) {
-    let Event::Decided(d, status) = e;
-    if json {
-        let line = serde_json::json!({
-            "event": "decided",
-            "iteration": d.iteration,
-            "decision": d.decision,
-            "params": d.params,
-            "s": d.stats.s,
-            "mx": d.stats.mx,
-            "my": d.stats.my,
-            "ex": d.stats.ex,
-            "status": serde_json::from_str::<serde_json::Value>(&status.to_json()).unwrap_or_default(),
-        });
-        println!("{line}");
-    } else {
-        let f = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3}"));
-        println!(
-            "[{}/{}] iteration {:>4} {:<10} s {:.2} mx {} my {} ex {}  (A {} E {} R {}, {:.1} trials/s)",
-            status.decided,
-            status.planned,
-            d.iteration,
-            format!("{:?}", d.decision).to_uppercase(),
-            d.stats.s,
-            f(d.stats.mx),
-            f(d.stats.my),
-            f(d.stats.ex),
-            status.accepts,
-            status.equivalents,
-            status.rejects,
-            status.trials_per_s
-        );
-    }
+/// Shows the service's events in a [`View`] until the channel closes.
+fn spawn_view(
+    json: bool,
+    mut rx: tokio::sync::mpsc::UnboundedReceiver<Event>,
+) -> tokio::task::JoinHandle<(View, Option<RunStatus>)> {
+    tokio::spawn(async move {
+        let mut view = View::new(json);
+        let mut last = None;
+        while let Some(e) = rx.recv().await {
+            match e {
+                Event::Started(history, status) => {
+                    view.history(&history);
+                    view.status(&status);
+                    last = Some(status);
+                }
+                Event::Decided(result, status) => {
+                    view.decided(&result);
+                    view.status(&status);
+                    last = Some(status);
+                }
+            }
+        }
+        (view, last)
+    })
 }
 
 /// CPU time (user + system) this process has used, from `/proc/self/stat`
@@ -142,51 +131,25 @@ pub fn process_cpu_seconds() -> Option<f64> {
     Some((utime + stime) / 100.0)
 }
 
-/// The two answers of the paper: Optim.1 (ν′, the best-first agent) and
-/// Optim.2 (CLOP's mean, the best-average agent), from the last status.
-fn print_optima(status: &RunStatus, counters: &service::Counters, json: bool) {
-    if json {
-        let line = serde_json::json!({
-            "event": "finished",
-            "status": serde_json::from_str::<serde_json::Value>(&status.to_json()).unwrap_or_default(),
-            "accepted": counters.accepted,
-            "duplicates": counters.duplicates,
-            "refused": counters.refused,
-            "redispatched": counters.redispatched,
-            "cpu_s": process_cpu_seconds(),
-        });
-        println!("{line}");
-        return;
-    }
-    let params = |p: &[(String, f64)]| {
-        p.iter()
-            .map(|(n, v)| format!("{n} = {v:.4}"))
-            .collect::<Vec<_>>()
-            .join(", ")
-    };
-    match &status.best {
-        Some(b) => println!(
-            "Optim.1 (nu', iteration {}): s {:.2} mx {} my {} ex {}\n  {}",
-            b.iteration,
-            b.stats.s,
-            b.stats.mx.map_or("-".into(), |v| format!("{v:.3} m")),
-            b.stats.my.map_or("-".into(), |v| format!("{v:.3} m")),
-            b.stats.ex.map_or("-".into(), |v| format!("{v:.3} m")),
-            params(&b.params)
-        ),
-        None => println!("Optim.1: no parameter set was accepted"),
-    }
-    println!("Optim.2 (CLOP's mean):\n  {}", params(&status.optim2));
-}
-
 fn summary(
     run_dir: &std::path::Path,
     ended: &Ended,
-    last: Option<&RunStatus>,
-    json: bool,
+    view: Option<(View, Option<RunStatus>)>,
 ) -> Result<(), Failure> {
-    if let (Some(status), Ended::Finished(c)) = (last, ended) {
-        print_optima(status, c, json);
+    if let Some((mut view, last)) = view {
+        match (last, ended) {
+            (Some(status), Ended::Finished(c)) => view.finish(
+                &status,
+                serde_json::json!({
+                    "accepted": c.accepted,
+                    "duplicates": c.duplicates,
+                    "refused": c.refused,
+                    "redispatched": c.redispatched,
+                    "cpu_s": process_cpu_seconds(),
+                }),
+            ),
+            _ => view.abandon(),
+        }
     }
     match ended {
         Ended::Finished(c) => {
@@ -219,16 +182,8 @@ pub fn coordinator(job: &JobArgs, net: &NetArgs, json: bool) -> Result<(), Failu
             .await
             .map_err(|e| Failure::Job(anyhow!("zenoh: {e}")))?;
         let shutdown = signals();
-        let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel();
-        let printer = tokio::spawn(async move {
-            let mut last = None;
-            while let Some(e) = rx.recv().await {
-                print_event(&e, json);
-                let Event::Decided(_, status) = e;
-                last = Some(status);
-            }
-            last
-        });
+        let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
+        let printer = spawn_view(json, rx);
         let ended = service::serve(
             session.clone(),
             run,
@@ -239,9 +194,9 @@ pub fn coordinator(job: &JobArgs, net: &NetArgs, json: bool) -> Result<(), Failu
         )
         .await
         .map_err(|e| Failure::Job(e.into()))?;
-        let last = printer.await.ok().flatten();
+        let view = printer.await.ok();
         let _ = session.close().await;
-        summary(&job.out, &ended, last.as_ref(), json)
+        summary(&job.out, &ended, view)
     })
 }
 
@@ -290,6 +245,7 @@ pub fn run(job: &JobArgs, workers: Option<u32>, json: bool) -> Result<(), Failur
     }
     let port = free_loopback_port().map_err(Failure::Job)?;
     let endpoint = format!("tcp/127.0.0.1:{port}");
+    eprintln!("zenoh on {endpoint}; watch from another terminal with `naofarm watch RUN --connect {endpoint}`");
     let coord_net = NetArgs {
         listen: vec![endpoint.clone()],
         prefix: protocol::keys::DEFAULT_PREFIX.to_string(),
@@ -327,16 +283,8 @@ pub fn run(job: &JobArgs, workers: Option<u32>, json: bool) -> Result<(), Failur
                 shutdown.clone(),
             )));
         }
-        let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel();
-        let printer = tokio::spawn(async move {
-            let mut last = None;
-            while let Some(e) = rx.recv().await {
-                print_event(&e, json);
-                let Event::Decided(_, status) = e;
-                last = Some(status);
-            }
-            last
-        });
+        let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
+        let printer = spawn_view(json, rx);
         let ended = service::serve(
             session.clone(),
             run,
@@ -346,7 +294,7 @@ pub fn run(job: &JobArgs, workers: Option<u32>, json: bool) -> Result<(), Failur
             Some(tx),
         )
         .await;
-        let last = printer.await.ok().flatten();
+        let view = printer.await.ok();
         for ws in &worker_sessions {
             let _ = ws.close().await;
         }
@@ -355,6 +303,6 @@ pub fn run(job: &JobArgs, workers: Option<u32>, json: bool) -> Result<(), Failur
         }
         let _ = session.close().await;
         let ended = ended.map_err(|e| Failure::Job(e.into()))?;
-        summary(&job.out, &ended, last.as_ref(), json)
+        summary(&job.out, &ended, view)
     })
 }

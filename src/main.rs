@@ -6,6 +6,8 @@ mod farm;
 mod history;
 mod net;
 mod robot;
+mod view;
+mod watch;
 
 use std::process::ExitCode;
 
@@ -15,8 +17,12 @@ fn main() -> ExitCode {
     let args = cli::Cli::parse();
     tracing_subscriber::fmt()
         .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
+                tracing_subscriber::EnvFilter::new(
+                    // zenoh warns when a peer's scouting delay passes; not ours to act on.
+                    "warn,zenoh::net::runtime::orchestrator=error",
+                )
+            }),
         )
         .with_writer(std::io::stderr)
         .init();

@@ -209,7 +209,12 @@ n_mcmc = 100
         /// Waits until `n` iterations have been decided (by its JSON lines).
         fn wait_decided(&mut self, n: usize) {
             let deadline = Instant::now() + TIMEOUT;
-            while self.seen.len() < n {
+            let decided = |seen: &[String]| {
+                seen.iter()
+                    .filter(|l| l.starts_with("{\"event\":\"decided\""))
+                    .count()
+            };
+            while decided(&self.seen) < n {
                 let left = deadline.saturating_duration_since(Instant::now());
                 match self.lines.recv_timeout(left) {
                     Ok(l) => self.seen.push(l),
@@ -564,20 +569,36 @@ n_mcmc = 100
     }
 }
 
-/// The JSON lines of `run --json` / `coordinator --json`, split into the
-/// decided iterations and the final `finished` line.
-fn events(stdout: &[u8]) -> (Vec<serde_json::Value>, Option<serde_json::Value>) {
-    let mut decided = Vec::new();
-    let mut finished = None;
+/// The JSON lines of `run --json` / `coordinator --json` / `watch --json`:
+/// the decided iterations' results (history first), the last status, and
+/// the final `finished` line.
+struct Events {
+    history: Vec<serde_json::Value>,
+    decided: Vec<serde_json::Value>,
+    status: Option<serde_json::Value>,
+    finished: Option<serde_json::Value>,
+}
+
+fn events(stdout: &[u8]) -> Events {
+    let mut e = Events {
+        history: Vec::new(),
+        decided: Vec::new(),
+        status: None,
+        finished: None,
+    };
     for l in String::from_utf8_lossy(stdout).lines() {
-        let v: serde_json::Value = serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}"));
+        let v: serde_json::Value =
+            serde_json::from_str(l).unwrap_or_else(|err| panic!("{err}: {l}"));
         match v["event"].as_str() {
-            Some("decided") => decided.push(v),
-            Some("finished") => finished = Some(v),
+            Some("history") => e.history.push(v["result"].clone()),
+            Some("decided") => e.decided.push(v["result"].clone()),
+            Some("status") => e.status = Some(v["status"].clone()),
+            Some("finished") => e.finished = Some(v),
+            Some("trial") => {}
             other => panic!("unknown event {other:?}: {l}"),
         }
     }
-    (decided, finished)
+    e
 }
 
 #[test]
@@ -590,11 +611,13 @@ fn run_completes_a_synthetic_experiment_in_one_process() {
             .arg("--out")
             .arg(dir.join("run")),
     );
-    let (lines, finished) = events(&out.stdout);
+    let ev = events(&out.stdout);
+    let lines = ev.decided;
     assert_eq!(lines.len(), 8);
-    assert_eq!(lines[7]["status"]["decided"], 8);
-    assert_eq!(lines[7]["status"]["finished"], true);
-    let finished = finished.expect("a finished line with the optima");
+    let status = ev.status.expect("status lines");
+    assert_eq!(status["decided"], 8);
+    assert_eq!(status["finished"], true);
+    let finished = ev.finished.expect("a finished line with the optima");
     let best = &finished["status"]["best"];
     assert!(best["iteration"].is_u64(), "Optim.1: {finished}");
     assert_eq!(
@@ -608,7 +631,7 @@ fn run_completes_a_synthetic_experiment_in_one_process() {
     assert_eq!(rows.len(), 8);
     for (row, line) in rows.iter().zip(&lines) {
         assert_eq!(row["iteration"], line["iteration"]);
-        assert_eq!(row["mx"], line["mx"]);
+        assert_eq!(row["mx"], line["stats"]["mx"]);
         assert!(["ACCEPT", "EQUIVALENT", "REJECT"].contains(&row["decision"].as_str().unwrap()));
         assert_eq!(row["params"].as_object().map(|o| o.len()), Some(5));
     }
@@ -687,10 +710,15 @@ fn the_main_job_runs_five_nao_iterations() {
             .arg("--out")
             .arg(dir.join("run")),
     );
-    let (lines, finished) = events(&out.stdout);
+    let ev = events(&out.stdout);
+    let lines = ev.decided;
     assert_eq!(lines.len(), 5);
-    assert_eq!(lines[0]["params"][0], -0.04, "the expert set first");
-    let finished = finished.expect("finished line");
+    assert_eq!(
+        lines[0]["params"][0],
+        serde_json::json!(["ThighRelHip2_Z", -0.04]),
+        "the expert set first"
+    );
+    let finished = ev.finished.expect("finished line");
     assert_eq!(finished["status"]["decided"], 5);
     assert_eq!(finished["status"]["finished"], true);
 }
@@ -803,13 +831,13 @@ fn the_nao_farm_gives_the_same_history_with_one_or_two_workers() {
                 .arg(&out_dir),
         );
         events(&out.stdout)
-            .0
+            .decided
             .into_iter()
             .map(|v| {
                 (
                     v["iteration"].clone(),
                     v["decision"].clone(),
-                    v["mx"].clone(),
+                    v["stats"]["mx"].clone(),
                     v["params"].clone(),
                 )
             })

@@ -70,8 +70,10 @@ pub enum Ended {
 /// Progress events for views (the run's own terminal, tests).
 #[derive(Debug, Clone)]
 pub enum Event {
-    /// An iteration was decided.
-    Decided(DecidedIteration, RunStatus),
+    /// The state when the service starts (a resumed run's history included).
+    Started(Vec<IterationResult>, RunStatus),
+    /// An iteration was decided: what the results topic carries, and the status after it.
+    Decided(IterationResult, RunStatus),
 }
 
 /// Service failures.
@@ -207,6 +209,11 @@ pub async fn serve(
         .declare_queryable(keys::history(&prefix, &name))
         .await
         .map_err(zerr)?;
+    let _token = session
+        .liveliness()
+        .declare_token(keys::coordinator(&prefix, &name))
+        .await
+        .map_err(zerr)?;
     let mut st = State {
         run,
         cfg,
@@ -221,6 +228,17 @@ pub async fn serve(
         started: Instant::now(),
         trials_done: 0,
     };
+    // A resumed run answers history queries with what it decided before.
+    st.history = st
+        .run
+        .evolve()
+        .history()
+        .iter()
+        .map(|d| st.result_of(d))
+        .collect();
+    if let Some(tx) = &events {
+        let _ = tx.send(Event::Started(st.history.clone(), st.status()));
+    }
     handle_effects(&session, &mut st, effects, events.as_ref()).await?;
     let mut tick = tokio::time::interval(Duration::from_millis(50));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -329,9 +347,11 @@ pub async fn serve(
 }
 
 async fn put_json(session: &Session, key: &str, body: &str) {
+    // Block, not drop, under congestion: watchers count on every result.
     if let Err(e) = session
         .put(key, body.to_string())
         .encoding(Encoding::APPLICATION_JSON)
+        .congestion_control(zenoh::qos::CongestionControl::Block)
         .await
     {
         tracing::warn!(key, error = %e, "publish failed");
@@ -433,9 +453,9 @@ async fn handle_effects(
                 .await;
                 let status = st.status();
                 put_json(session, &keys::status(&prefix, &name), &status.to_json()).await;
-                st.history.push(r);
+                st.history.push(r.clone());
                 if let Some(tx) = events {
-                    let _ = tx.send(Event::Decided(d, status));
+                    let _ = tx.send(Event::Decided(r, status));
                 }
             }
             Effect::Finished => st.finished = true,

@@ -106,6 +106,13 @@ pub fn outcomes(prefix: &str) -> String {
     format!("{prefix}/@outcomes")
 }
 
+/// `<prefix>/@coordinators/<run>`: the liveliness token of a run's coordinator
+/// (watchers notice a coordinator that stopped).
+#[must_use]
+pub fn coordinator(prefix: &str, run: &str) -> String {
+    format!("{prefix}/@coordinators/{run}")
+}
+
 /// Extracts the last chunk of a key (a worker id from a liveliness key).
 #[must_use]
 pub fn last_chunk(key: &str) -> &str {

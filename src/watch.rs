@@ -1,0 +1,267 @@
+//! `naofarm watch [RUN]`: lists the runs a zenoh session can see, or follows
+//! one run from any machine: its status and history by query first, then
+//! its result, trial and status topics. It only subscribes and queries; it
+//! never publishes, so it cannot disturb the run.
+
+use std::time::{Duration, Instant};
+
+use anyhow::anyhow;
+use clap::Args;
+use protocol::{
+    keys,
+    wire::{IterationResult, RunStatus, TrialOutcome, WireMessage},
+};
+use zenoh::{query::ConsolidationMode, sample::SampleKind, Session};
+
+use crate::{cli::Failure, net::NetArgs, view::View};
+
+/// Arguments of `watch`.
+#[derive(Args, Debug)]
+pub struct WatchArgs {
+    /// The run to follow; without it, list the runs that answer.
+    run: Option<String>,
+    #[command(flatten)]
+    net: NetArgs,
+    /// One JSON line per event instead of the terminal view.
+    #[arg(long)]
+    json: bool,
+    /// Seconds to wait for a coordinator to answer before giving up.
+    #[arg(long, default_value_t = 5.0)]
+    timeout_s: f64,
+}
+
+/// Where a watcher connects when nothing is given: a coordinator's default.
+const DEFAULT_CONNECT: &str = "tcp/127.0.0.1:7447";
+
+fn zerr(e: impl std::fmt::Display) -> Failure {
+    Failure::Job(anyhow!("zenoh: {e}"))
+}
+
+/// Asks `key` until some answer comes or `deadline` passes (the session may
+/// still be connecting when the first query leaves: it then gets no reply).
+async fn query_until(
+    session: &Session,
+    key: &str,
+    deadline: Instant,
+) -> Result<Vec<String>, Failure> {
+    loop {
+        let replies = session
+            .get(key)
+            .consolidation(ConsolidationMode::None)
+            .timeout(Duration::from_secs(2))
+            .await
+            .map_err(zerr)?;
+        let mut out = Vec::new();
+        while let Ok(reply) = replies.recv_async().await {
+            match reply.result() {
+                Ok(sample) => {
+                    out.push(String::from_utf8_lossy(&sample.payload().to_bytes()).into_owned());
+                }
+                Err(e) => tracing::warn!(key, error = ?e.payload(), "error reply"),
+            }
+        }
+        if !out.is_empty() || Instant::now() >= deadline {
+            return Ok(out);
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+/// `naofarm watch`.
+pub fn watch(a: &WatchArgs) -> Result<(), Failure> {
+    if !(a.timeout_s.is_finite() && a.timeout_s > 0.0) {
+        return Err(Failure::Usage(anyhow!(
+            "--timeout-s must be a positive number of seconds"
+        )));
+    }
+    if let Some(run) = &a.run {
+        keys::check_chunk("run", run).map_err(|e| Failure::Usage(anyhow!(e)))?;
+    }
+    let mut net = a.net.clone();
+    if net.connect.is_empty() && net.config.is_none() {
+        net.connect.push(DEFAULT_CONNECT.to_string());
+    }
+    let cfg = net.zenoh_config(&[]).map_err(Failure::Usage)?;
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .map_err(|e| Failure::Job(e.into()))?;
+    rt.block_on(async {
+        let session = zenoh::open(cfg).await.map_err(zerr)?;
+        let deadline = Instant::now() + Duration::from_secs_f64(a.timeout_s);
+        let r = match &a.run {
+            None => list(&session, &net, deadline, a.json).await,
+            Some(run) => follow(&session, &net, run, deadline, a.json).await,
+        };
+        let _ = session.close().await;
+        r
+    })
+}
+
+async fn list(
+    session: &Session,
+    net: &NetArgs,
+    deadline: Instant,
+    json: bool,
+) -> Result<(), Failure> {
+    let answers = query_until(session, &keys::status_all(&net.prefix), deadline).await?;
+    let mut runs: Vec<RunStatus> = answers
+        .iter()
+        .filter_map(|t| match RunStatus::from_json(t) {
+            Ok(s) => Some(s),
+            Err(e) => {
+                tracing::warn!(error = %e, "ignored a status answer");
+                None
+            }
+        })
+        .collect();
+    runs.sort_by(|a, b| a.run.cmp(&b.run));
+    if runs.is_empty() {
+        eprintln!("no runs answer at {}", net.connect.join(", "));
+        return Ok(());
+    }
+    for s in &runs {
+        if json {
+            println!("{}", s.to_json());
+        } else {
+            println!(
+                "{:<24} {:>5}/{:<5} decided  A {} E {} R {}  {} workers  {:.1} trials/s{}",
+                s.run,
+                s.decided,
+                s.planned,
+                s.accepts,
+                s.equivalents,
+                s.rejects,
+                s.workers,
+                s.trials_per_s,
+                if s.finished { "  (finished)" } else { "" }
+            );
+        }
+    }
+    Ok(())
+}
+
+async fn follow(
+    session: &Session,
+    net: &NetArgs,
+    run: &str,
+    deadline: Instant,
+    json: bool,
+) -> Result<(), Failure> {
+    let prefix = &net.prefix;
+    // Subscribe first, then ask: whatever is decided in between comes
+    // twice and is reported once.
+    let results = session
+        .declare_subscriber(keys::results_all(prefix, run))
+        .await
+        .map_err(zerr)?;
+    let trials = session
+        .declare_subscriber(keys::trials_all(prefix, run))
+        .await
+        .map_err(zerr)?;
+    let statuses = session
+        .declare_subscriber(keys::status(prefix, run))
+        .await
+        .map_err(zerr)?;
+    let coordinator = session
+        .liveliness()
+        .declare_subscriber(keys::coordinator(prefix, run))
+        .await
+        .map_err(zerr)?;
+    let answers = query_until(session, &keys::status(prefix, run), deadline).await?;
+    let Some(status) = answers.iter().find_map(|t| RunStatus::from_json(t).ok()) else {
+        return Err(Failure::Job(anyhow!(
+            "no coordinator answers for run `{run}` at {}: the run is finished or unknown \
+             (`naofarm watch` without a run lists the runs that answer)",
+            net.connect.join(", ")
+        )));
+    };
+    if status.finished {
+        return Err(Failure::Job(anyhow!(
+            "run `{run}` is finished ({} of {} iterations decided); see `naofarm history DIR`",
+            status.decided,
+            status.planned
+        )));
+    }
+    let history: Vec<IterationResult> =
+        match query_until(session, &keys::history(prefix, run), deadline)
+            .await?
+            .first()
+        {
+            Some(text) => serde_json::from_str::<Vec<IterationResult>>(text)
+                .map_err(|e| Failure::Job(anyhow!("the history answer does not parse: {e}")))?,
+            None => Vec::new(),
+        };
+    let mut view = View::new(json);
+    view.history(&history);
+    view.status(&status);
+    let mut last = status;
+    let shutdown = tokio::signal::ctrl_c();
+    tokio::pin!(shutdown);
+    // When the coordinator's token goes, its last messages may still be on
+    // the way (declarations overtake data): wait for them this long.
+    let mut gone: Option<tokio::time::Instant> = None;
+    let far = tokio::time::Instant::now() + Duration::from_secs(86_400 * 365);
+    loop {
+        tokio::select! {
+            s = results.recv_async() => {
+                let s = s.map_err(zerr)?;
+                match IterationResult::from_json(&String::from_utf8_lossy(&s.payload().to_bytes())) {
+                    Ok(r) if r.run == run => {
+                        view.decided(&r);
+                        if gone.is_some() && view.reported() as u64 >= last.planned {
+                            last.decided = last.planned;
+                            last.finished = true;
+                            view.status(&last);
+                            view.finish(&last, serde_json::json!({}));
+                            return Ok(());
+                        }
+                    }
+                    Ok(r) => tracing::warn!(run = %r.run, "ignored a result of another run"),
+                    Err(e) => tracing::warn!(error = %e, "ignored a malformed result"),
+                }
+            }
+            s = trials.recv_async() => {
+                let s = s.map_err(zerr)?;
+                match TrialOutcome::from_json(&String::from_utf8_lossy(&s.payload().to_bytes())) {
+                    Ok(o) => view.trial(&o),
+                    Err(e) => tracing::warn!(error = %e, "ignored a malformed trial outcome"),
+                }
+            }
+            s = statuses.recv_async() => {
+                let s = s.map_err(zerr)?;
+                match RunStatus::from_json(&String::from_utf8_lossy(&s.payload().to_bytes())) {
+                    Ok(st) if st.run == run => {
+                        view.status(&st);
+                        if st.finished {
+                            view.finish(&st, serde_json::json!({}));
+                            return Ok(());
+                        }
+                        last = st;
+                    }
+                    Ok(_) => {}
+                    Err(e) => tracing::warn!(error = %e, "ignored a malformed status"),
+                }
+            }
+            s = coordinator.recv_async() => {
+                let s = s.map_err(zerr)?;
+                if s.kind() == SampleKind::Delete && gone.is_none() {
+                    gone = Some(tokio::time::Instant::now() + Duration::from_secs(3));
+                }
+            }
+            () = tokio::time::sleep_until(gone.unwrap_or(far)) => {
+                view.abandon();
+                return Err(Failure::Job(anyhow!(
+                    "the coordinator of run `{run}` stopped after {} of {} iterations",
+                    view.reported(),
+                    last.planned
+                )));
+            }
+            _ = &mut shutdown => {
+                view.abandon();
+                return Ok(());
+            }
+        }
+    }
+}
