@@ -105,12 +105,12 @@ fn spawn_view(
                 Event::Started(history, status) => {
                     view.history(&history);
                     view.status(&status);
-                    last = Some(status);
+                    last = Some(*status);
                 }
                 Event::Decided(result, status) => {
                     view.decided(&result);
                     view.status(&status);
-                    last = Some(status);
+                    last = Some(*status);
                 }
             }
         }

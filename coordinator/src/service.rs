@@ -71,9 +71,9 @@ pub enum Ended {
 #[derive(Debug, Clone)]
 pub enum Event {
     /// The state when the service starts (a resumed run's history included).
-    Started(Vec<IterationResult>, RunStatus),
+    Started(Vec<IterationResult>, Box<RunStatus>),
     /// An iteration was decided: what the results topic carries, and the status after it.
-    Decided(IterationResult, RunStatus),
+    Decided(Box<IterationResult>, Box<RunStatus>),
 }
 
 /// Service failures.
@@ -237,7 +237,7 @@ pub async fn serve(
         .map(|d| st.result_of(d))
         .collect();
     if let Some(tx) = &events {
-        let _ = tx.send(Event::Started(st.history.clone(), st.status()));
+        let _ = tx.send(Event::Started(st.history.clone(), Box::new(st.status())));
     }
     handle_effects(&session, &mut st, effects, events.as_ref()).await?;
     let mut tick = tokio::time::interval(Duration::from_millis(50));
@@ -455,7 +455,7 @@ async fn handle_effects(
                 put_json(session, &keys::status(&prefix, &name), &status.to_json()).await;
                 st.history.push(r.clone());
                 if let Some(tx) = events {
-                    let _ = tx.send(Event::Decided(r, status));
+                    let _ = tx.send(Event::Decided(Box::new(r), Box::new(status)));
                 }
             }
             Effect::Finished => st.finished = true,
