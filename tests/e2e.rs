@@ -128,6 +128,7 @@ mod farm {
     };
 
     use super::{naofarm, scratch};
+    // `events` parses the JSON lines of run, coordinator and watch.
 
     const TIMEOUT: Duration = Duration::from_secs(120);
 
@@ -458,6 +459,274 @@ n_mcmc = 100
         } else {
             None
         }
+    }
+
+    /// The README's field tables: schema name → (field, type) rows.
+    fn readme_schemas() -> std::collections::BTreeMap<String, Vec<(String, String)>> {
+        let text = std::fs::read_to_string(super::root().join("README.md")).unwrap();
+        let mut out = std::collections::BTreeMap::new();
+        let mut current: Option<(String, Vec<(String, String)>)> = None;
+        for line in text.lines() {
+            if let Some(name) = line
+                .strip_prefix("<!-- schema:")
+                .and_then(|l| l.strip_suffix(" -->"))
+            {
+                current = Some((name.to_string(), Vec::new()));
+            } else if line == "<!-- /schema -->" {
+                let (name, rows) = current.take().expect("a /schema without a schema");
+                out.insert(name, rows);
+            } else if let Some((_, rows)) = current.as_mut() {
+                let cells: Vec<&str> = line.split('|').map(str::trim).collect();
+                if cells.len() >= 4 && cells[1].starts_with('`') {
+                    rows.push((cells[1].trim_matches('`').to_string(), cells[2].to_string()));
+                }
+            }
+        }
+        assert!(current.is_none(), "an unclosed schema table");
+        out
+    }
+
+    /// Checks `v` against schema `name`: every documented field with its
+    /// type, and no field the README does not document.
+    fn conforms(
+        schemas: &std::collections::BTreeMap<String, Vec<(String, String)>>,
+        name: &str,
+        v: &serde_json::Value,
+    ) -> Result<(), String> {
+        let rows = schemas
+            .get(name)
+            .ok_or_else(|| format!("no schema {name} in the README"))?;
+        let obj = v
+            .as_object()
+            .ok_or_else(|| format!("{name}: not an object: {v}"))?;
+        for key in obj.keys() {
+            if !rows.iter().any(|(f, _)| f == key) {
+                return Err(format!("{name}.{key} is not documented in the README"));
+            }
+        }
+        for (field, ty) in rows {
+            let value = obj
+                .get(field)
+                .ok_or_else(|| format!("{name}.{field} is documented but missing"))?;
+            let (ty, nullable) = match ty.strip_suffix(" or null") {
+                Some(t) => (t, true),
+                None => (ty.as_str(), false),
+            };
+            if value.is_null() && nullable {
+                continue;
+            }
+            let ok = match ty {
+                "string" => value.is_string(),
+                "integer" => value.is_u64(),
+                "number" => value.is_number(),
+                "boolean" => value.is_boolean(),
+                "pairs" => value.as_array().is_some_and(|a| {
+                    a.iter().all(|p| {
+                        p.as_array()
+                            .is_some_and(|p| p.len() == 2 && p[0].is_string() && p[1].is_number())
+                    })
+                }),
+                other => {
+                    conforms(schemas, other, value)?;
+                    true
+                }
+            };
+            if !ok {
+                return Err(format!("{name}.{field} should be {ty}: {value}"));
+            }
+        }
+        Ok(())
+    }
+
+    fn session_to(port: u16) -> zenoh::Session {
+        use zenoh::Wait;
+        let mut cfg = zenoh::Config::default();
+        cfg.insert_json5("scouting/multicast/enabled", "false")
+            .unwrap();
+        cfg.insert_json5("listen/endpoints", "[]").unwrap();
+        cfg.insert_json5("connect/endpoints", &format!("[\"tcp/127.0.0.1:{port}\"]"))
+            .unwrap();
+        zenoh::open(cfg).wait().unwrap()
+    }
+
+    #[test]
+    fn every_topic_matches_the_readme_field_tables() {
+        use zenoh::Wait;
+        let schemas = readme_schemas();
+        for s in [
+            "Params",
+            "TrialOutcome",
+            "IterationResult",
+            "RunStatus",
+            "Stats",
+            "Best",
+        ] {
+            assert!(schemas.contains_key(s), "README lacks the {s} table");
+        }
+        let dir = scratch("schema");
+        let exp = experiment(&dir, 8);
+        let port = free_port();
+        let out = dir.join("run");
+        let mut c = Coordinator::start(&exp, &out, port, 30.0);
+        let session = session_to(port);
+        let (tx, rx) = mpsc::channel();
+        let _sub = session
+            .declare_subscriber("naofarm/farm/**")
+            .callback(move |s| {
+                let _ = tx.send((
+                    s.key_expr().as_str().to_string(),
+                    s.encoding().clone(),
+                    String::from_utf8_lossy(&s.payload().to_bytes()).into_owned(),
+                ));
+            })
+            .wait()
+            .unwrap();
+        // The coordinator answers its status query once the session is up;
+        // only then start the worker, so that no message is published unseen.
+        let ask = |key: String| loop {
+            let replies = session
+                .get(key.as_str())
+                .timeout(Duration::from_secs(2))
+                .wait()
+                .unwrap();
+            if let Ok(r) = replies.recv() {
+                let s = r.result().unwrap();
+                assert_eq!(s.encoding(), &zenoh::bytes::Encoding::APPLICATION_JSON);
+                let text = String::from_utf8_lossy(&s.payload().to_bytes()).into_owned();
+                break serde_json::from_str::<serde_json::Value>(&text).unwrap();
+            }
+        };
+        let status = ask(protocol::keys::status("naofarm", "farm"));
+        conforms(&schemas, "RunStatus", &status).unwrap();
+        let mut ws = vec![worker(port, 2, 5)];
+        c.wait_decided(4);
+        let history = ask(protocol::keys::history("naofarm", "farm"));
+        let rows = history.as_array().expect("the history is an array");
+        assert!(rows.len() >= 4);
+        for r in rows {
+            conforms(&schemas, "IterationResult", r).unwrap();
+        }
+        let status = c.wait_exit();
+        kill_all(&mut ws);
+        assert!(status.success());
+        let mut kinds = std::collections::BTreeMap::new();
+        while let Ok((key, encoding, text)) = rx.recv_timeout(Duration::from_millis(500)) {
+            assert_eq!(encoding, zenoh::bytes::Encoding::APPLICATION_JSON, "{key}");
+            let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+            let schema = match key.split('/').nth(2) {
+                Some("params") => "Params",
+                Some("trials") => "TrialOutcome",
+                Some("results") => "IterationResult",
+                Some("status") => "RunStatus",
+                other => panic!("an unexpected topic {other:?}: {key}"),
+            };
+            conforms(&schemas, schema, &v).unwrap_or_else(|e| panic!("{key}: {e}"));
+            *kinds.entry(schema).or_insert(0) += 1;
+        }
+        assert_eq!(kinds.get("TrialOutcome"), Some(&48), "{kinds:?}");
+        assert_eq!(kinds.get("IterationResult"), Some(&8), "{kinds:?}");
+        // The first D = 3 iterations open before this session subscribes.
+        assert!(kinds.get("Params").is_some_and(|&n| n >= 5), "{kinds:?}");
+        assert!(kinds.get("RunStatus").is_some_and(|&n| n >= 8), "{kinds:?}");
+        // A broken document fails the check (the check can fail).
+        let mut bad = history[0].clone();
+        bad["stats"]["undocumented"] = serde_json::json!(1);
+        assert!(conforms(&schemas, "IterationResult", &bad).is_err());
+    }
+
+    #[test]
+    fn a_late_watcher_gets_the_history_then_every_later_iteration_once() {
+        let dir = scratch("watch");
+        let exp = experiment(&dir, 14);
+        let port = free_port();
+        let out = dir.join("run");
+        let mut c = Coordinator::start(&exp, &out, port, 30.0);
+        let mut ws = vec![worker(port, 2, 40)];
+        c.wait_decided(4);
+        let watcher = naofarm()
+            .args(["watch", "farm", "--json", "--connect"])
+            .arg(format!("tcp/127.0.0.1:{port}"))
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let status = c.wait_exit();
+        kill_all(&mut ws);
+        assert!(status.success());
+        let w = watcher.wait_with_output().unwrap();
+        assert!(
+            w.status.success(),
+            "watch: {}",
+            String::from_utf8_lossy(&w.stderr)
+        );
+        let ev = super::events(&w.stdout);
+        assert!(ev.history.len() >= 4, "the status query's history");
+        assert!(!ev.decided.is_empty(), "followed live");
+        let mut seen: Vec<u64> = ev
+            .history
+            .iter()
+            .chain(&ev.decided)
+            .map(|r| r["iteration"].as_u64().unwrap())
+            .collect();
+        let reported = seen.len();
+        seen.sort_unstable();
+        seen.dedup();
+        assert_eq!(reported, seen.len(), "an iteration reported twice");
+        assert_eq!(seen, (0..14).collect::<Vec<u64>>(), "every iteration");
+        let journaled = decided(&journal(&out));
+        for r in ev.history.iter().chain(&ev.decided) {
+            let i = r["iteration"].as_u64().unwrap() as usize;
+            assert_eq!(r["stats"]["mx"].as_f64(), journaled[i].stats.mx);
+        }
+        let fin = ev.finished.expect("a finished line");
+        assert_eq!(fin["status"]["finished"], true);
+
+        // The run is over: watching it now says so and exits non-zero.
+        let after = naofarm()
+            .args(["watch", "farm", "--timeout-s", "1", "--connect"])
+            .arg(format!("tcp/127.0.0.1:{port}"))
+            .output()
+            .unwrap();
+        assert_eq!(after.status.code(), Some(1));
+        let err = String::from_utf8_lossy(&after.stderr);
+        assert!(err.contains("finished or unknown"), "{err}");
+    }
+
+    #[test]
+    fn watching_an_unknown_run_says_so() {
+        let dir = scratch("watch-unknown");
+        let exp = experiment(&dir, 3);
+        let port = free_port();
+        let out = dir.join("run");
+        let mut c = Coordinator::start(&exp, &out, port, 30.0);
+        let unknown = naofarm()
+            .args(["watch", "nosuchrun", "--timeout-s", "3", "--connect"])
+            .arg(format!("tcp/127.0.0.1:{port}"))
+            .output()
+            .unwrap();
+        let listed = naofarm()
+            .args(["watch", "--json", "--timeout-s", "5", "--connect"])
+            .arg(format!("tcp/127.0.0.1:{port}"))
+            .output()
+            .unwrap();
+        let mut ws = vec![worker(port, 2, 0)];
+        assert!(c.wait_exit().success());
+        kill_all(&mut ws);
+        assert_eq!(unknown.status.code(), Some(1));
+        let err = String::from_utf8_lossy(&unknown.stderr);
+        assert!(
+            err.contains("nosuchrun") && err.contains("unknown"),
+            "{err}"
+        );
+        assert!(listed.status.success());
+        let runs: Vec<serde_json::Value> = String::from_utf8_lossy(&listed.stdout)
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect();
+        assert_eq!(runs.len(), 1, "{runs:?}");
+        assert_eq!(runs[0]["run"], "farm");
+        let bad = naofarm().args(["watch", "a/b"]).output().unwrap();
+        assert_eq!(bad.status.code(), Some(2));
     }
 
     #[test]
