@@ -25,8 +25,8 @@ pub struct ClopBenchArgs {
     /// Seed of the outcome streams and samplers.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Algorithms, comma-separated (clop, random).
-    #[arg(long, default_value = "clop,random", value_delimiter = ',')]
+    /// Algorithms, comma-separated (clop, cmaes, random).
+    #[arg(long, default_value = "clop,cmaes,random", value_delimiter = ',')]
     algorithms: Vec<String>,
     /// Also measure the cost of one tell+ask at n = 100, 1000, 5000 for d = 1 and 5.
     #[arg(long)]

@@ -2,7 +2,8 @@
 //! machines, the durable journal, and the zenoh dispatch that drives them.
 //!
 //! Modules: [`clop`] (the optimiser, ask/tell), [`problems`] (CLOP's artificial
-//! test problems), [`bench`] (the CLOP benchmark harness).
+//! test problems), [`bench`] (the CLOP benchmark harness), [`cmaes`] (its
+//! CMA-ES baseline).
 //!
 //! The optimiser and the loop must not do I/O, read a clock or draw from an
 //! unseeded random stream; side effects (journal, publishing, progress) hang
@@ -11,6 +12,7 @@
 
 pub mod bench;
 pub mod clop;
+pub mod cmaes;
 pub mod evolve;
 pub mod journal;
 pub mod problems;
