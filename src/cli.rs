@@ -77,6 +77,8 @@ enum Command {
     /// Benchmarks: `bench clop` (regret and cost), `bench sim` (physics speed).
     #[command(subcommand)]
     Bench(BenchCommand),
+    /// Tune any noisy program locally with CLOP (an evaluator process or a script per game).
+    Clop(crate::tune::ClopArgs),
     /// Follow a run from any machine (live view or JSON lines); without RUN, list the runs.
     Watch(crate::watch::WatchArgs),
     /// Print a run's decided history H (iteration, p, s, mx, my, ex, ey, decision, best).
@@ -112,6 +114,7 @@ pub fn dispatch(cli: Cli) -> Result<(), Failure> {
             min_trial_ms,
         } => crate::farm::worker(&net, slots, min_trial_ms),
         Command::Watch(a) => crate::watch::watch(&a),
+        Command::Clop(a) => crate::tune::clop(&a),
         Command::History { dir, json, csv } => crate::history::history(&dir, json, csv),
         Command::Bench(b) => crate::benches::bench(b),
         Command::Stand(a) => crate::robot::stand(&a),

@@ -6,6 +6,7 @@ mod farm;
 mod history;
 mod net;
 mod robot;
+mod tune;
 mod view;
 mod watch;
 

@@ -293,6 +293,14 @@ impl Clop {
         u
     }
 
+    /// Replays a game asked by an earlier life of this optimiser (a log being
+    /// resumed): restores the sampler's chain where that `ask` left it, then
+    /// tells the outcome, so the next `ask` equals an uninterrupted run's.
+    pub fn replay(&mut self, u: &[f64], outcome: Outcome) {
+        self.last_sample = Some(self.dims.iter().zip(u).map(|(d, u)| d.snap(*u)).collect());
+        self.tell(u, outcome);
+    }
+
     /// Adds the outcome of a game played at `u` (internal coordinates).
     pub fn tell(&mut self, u: &[f64], outcome: Outcome) {
         let u: Vec<f64> = self.dims.iter().zip(u).map(|(d, u)| d.snap(*u)).collect();
@@ -748,6 +756,63 @@ mod tests {
     }
 
     #[test]
+    fn a_point_dimension_and_one_outcome_type_stay_finite() {
+        // hi = lo, with a second, ordinary dimension; then all wins.
+        let mut c = Clop::new(
+            vec![Dim::linear(0.5, 0.5), Dim::linear(-1.0, 1.0)],
+            settings(),
+        );
+        for i in 0..60 {
+            let u = c.ask(i);
+            c.tell(
+                &u,
+                if i % 3 == 0 {
+                    Outcome::Win
+                } else {
+                    Outcome::Loss
+                },
+            );
+        }
+        for v in c
+            .to_external(&c.mean())
+            .into_iter()
+            .chain(c.to_external(&c.max()))
+        {
+            assert!(v.is_finite());
+        }
+        assert_eq!(c.to_external(&c.mean())[0], 0.5);
+        let mut wins = Clop::new(vec![Dim::linear(0.0, 1.0)], settings());
+        for i in 0..40 {
+            let u = wins.ask(i);
+            wins.tell(&u, Outcome::Win);
+        }
+        assert!(wins.mean()[0].is_finite() && wins.max()[0].is_finite());
+    }
+
+    #[test]
+    fn replaying_a_log_asks_what_an_uninterrupted_run_asks() {
+        let play = |i: u64| {
+            if i.is_multiple_of(3) {
+                Outcome::Win
+            } else {
+                Outcome::Loss
+            }
+        };
+        let mut straight = Clop::new(vec![Dim::linear(0.0, 1.0)], settings());
+        let mut log = Vec::new();
+        for i in 0..40 {
+            let u = straight.ask(i);
+            straight.tell(&u, play(i));
+            log.push(u);
+        }
+        let mut resumed = Clop::new(vec![Dim::linear(0.0, 1.0)], settings());
+        for (i, u) in log.iter().enumerate() {
+            resumed.replay(u, play(i as u64));
+        }
+        assert_eq!(straight.ask(40), resumed.ask(40));
+    }
+
+    #[test]
     fn state_serialises() {
         let mut c = Clop::new(vec![Dim::linear(0.0, 1.0)], settings());
         for i in 0..30 {
@@ -762,9 +827,19 @@ mod tests {
             );
         }
         let bytes = bincode::serde::encode_to_vec(&c, bincode::config::standard()).unwrap();
-        let (back, _): (Clop, usize) =
+        let (mut back, _): (Clop, usize) =
             bincode::serde::decode_from_slice(&bytes, bincode::config::standard()).unwrap();
         assert_eq!(back, c);
+        // The restored state asks exactly the same next points.
+        for i in 30..40 {
+            let (a, b) = (c.ask(i), back.ask(i));
+            assert_eq!(
+                a.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+                b.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+            );
+            c.tell(&a, Outcome::Win);
+            back.tell(&b, Outcome::Win);
+        }
     }
 
     proptest::proptest! {
