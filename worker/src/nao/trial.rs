@@ -277,3 +277,63 @@ mod tests {
         assert!(falls > 0);
     }
 }
+
+#[cfg(test)]
+mod probe {
+    use super::*;
+
+    #[test]
+    #[ignore = "diagnostic for #3: prints the worst joint-limit excess over a grid of L"]
+    fn worst_limit_excess_over_l() {
+        let model = NaoModel::with_params(0, &[]).unwrap();
+        let sets: Vec<Vec<(String, f64)>> = {
+            let mut v = Vec::new();
+            for step in [0.08, 0.10, 0.12, 0.15] {
+                for flex in [0.6, 0.73, 0.95] {
+                    for thigh in [-0.08, -0.04, -0.03] {
+                        v.push(vec![
+                            ("xlength_step_max".to_string(), step),
+                            ("ratio_flexion".to_string(), flex),
+                            ("ThighRelHip2_Z".to_string(), thigh),
+                        ]);
+                    }
+                }
+            }
+            v
+        };
+        let mut worst: Vec<(f64, String)> = Vec::new();
+        for p in &sets {
+            let m = NaoModel::with_params(0, p).unwrap();
+            let mut excess = vec![0.0f64; m.joints.len()];
+            let mut when = 0.0;
+            let mut c = 0;
+            let tr = run_observed(0, p, 1, 10.0, SimSettings::default(), &mut |sim, _| {
+                c += 1;
+                for (k, (j, a)) in m.joints.iter().zip(&sim.joint_angles()).enumerate() {
+                    let e = (j.limits_rad.0 - a).max(a - j.limits_rad.1).max(0.0);
+                    if e > excess[k] {
+                        excess[k] = e;
+                        when = f64::from(c) * 0.02;
+                    }
+                }
+            })
+            .unwrap();
+            let (k, e) =
+                excess.iter().enumerate().fold(
+                    (0, 0.0),
+                    |acc, (k, e)| if *e > acc.1 { (k, *e) } else { acc },
+                );
+            worst.push((
+                e.to_degrees(),
+                format!(
+                    "{} at {when:.2}s fell {:?} {:?}",
+                    model.joints[k].name, tr.fall_time_s, p
+                ),
+            ));
+        }
+        worst.sort_by(|a, b| b.0.total_cmp(&a.0));
+        for w in worst.iter().take(12) {
+            eprintln!("{:.2} deg  {}", w.0, w.1);
+        }
+    }
+}

@@ -182,6 +182,8 @@ pub struct Gait {
     com: Vec<[f64; 2]>,
     /// For each model joint, the (side, le index 0..6) it takes from the IK.
     leg_slots: Vec<Option<(usize, usize)>>,
+    /// Each joint's stops (model order): targets are clamped into them.
+    limits: Vec<(f64, f64)>,
 }
 
 /// Which IK output drives each model joint: `lle1`..`lle6` → (0, 0..6),
@@ -230,6 +232,7 @@ impl Gait {
             grid_start: 0.0,
             com: Vec::new(),
             leg_slots: leg_slots(model),
+            limits: model.joints.iter().map(|j| j.limits_rad).collect(),
         };
         g.plan_com(duration_s, tc);
         g
@@ -359,13 +362,18 @@ impl Gait {
     /// Targets for every model joint at time t (arms and head at their rest
     /// posture `rest`, one angle per joint of the model the gait was planned for).
     #[must_use]
+    ///
+    /// A target beyond a joint's stop is clamped to the stop, as a league
+    /// agent clamps its servo targets: commanding a hinge into its stop only
+    /// loads the limit constraint, which then yields a few degrees.
     pub fn targets(&self, rest: &[f64], t: f64) -> Vec<f64> {
         let legs = self.leg_targets(t);
         let mut q = rest.to_vec();
-        for (qj, slot) in q.iter_mut().zip(&self.leg_slots) {
+        for ((qj, slot), (lo, hi)) in q.iter_mut().zip(&self.leg_slots).zip(&self.limits) {
             if let Some((side, i)) = slot {
                 *qj = legs[*side][*i];
             }
+            *qj = qj.clamp(*lo, *hi);
         }
         q
     }
