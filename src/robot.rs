@@ -120,6 +120,15 @@ pub struct TrialArgs {
     /// Threads (default: cores).
     #[arg(long)]
     threads: Option<usize>,
+    /// Physics sub-steps per 20 ms cycle (default 2; see `bench sim`).
+    #[arg(long)]
+    substeps: Option<u32>,
+    /// Rapier solver iterations per sub-step (default 1).
+    #[arg(long)]
+    solver_iterations: Option<usize>,
+    /// Rapier PGS iterations per solver iteration (default 12).
+    #[arg(long)]
+    pgs_iterations: Option<usize>,
     /// Machine-readable output with every trial.
     #[arg(long)]
     json: bool,
@@ -147,9 +156,40 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     let threads = a
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from));
+    let mut settings = SimSettings::default();
+    let bad = |what: &str| Failure::Usage(anyhow!("--{what} must be in 1..=64"));
+    if let Some(n) = a.substeps {
+        settings.substeps = if (1..=64).contains(&n) {
+            n
+        } else {
+            return Err(bad("substeps"));
+        };
+    }
+    if let Some(n) = a.solver_iterations {
+        settings.solver_iterations = if (1..=64).contains(&n) {
+            n
+        } else {
+            return Err(bad("solver-iterations"));
+        };
+    }
+    if let Some(n) = a.pgs_iterations {
+        settings.pgs_iterations = if (1..=64).contains(&n) {
+            n
+        } else {
+            return Err(bad("pgs-iterations"));
+        };
+    }
     let t0 = Instant::now();
-    let runs = trial::run_many(a.robot_type, &params, a.seed, a.trials, a.duration, threads)
-        .map_err(|e| Failure::Job(e.into()))?;
+    let runs = trial::run_many_with(
+        a.robot_type,
+        &params,
+        a.seed,
+        a.trials,
+        a.duration,
+        threads,
+        settings,
+    )
+    .map_err(|e| Failure::Job(e.into()))?;
     let wall = t0.elapsed().as_secs_f64();
     let results: Vec<TrialResult> = runs
         .iter()

@@ -162,6 +162,27 @@ pub fn run_many(
     duration_s: f64,
     threads: usize,
 ) -> Result<Vec<NaoTrial>, NaoTrialError> {
+    run_many_with(
+        robot_type,
+        params,
+        seed0,
+        n,
+        duration_s,
+        threads,
+        SimSettings::default(),
+    )
+}
+
+/// [`run_many`] with other physics settings (to compare settings on the walk).
+pub fn run_many_with(
+    robot_type: u8,
+    params: &[(String, f64)],
+    seed0: u64,
+    n: u64,
+    duration_s: f64,
+    threads: usize,
+    settings: SimSettings,
+) -> Result<Vec<NaoTrial>, NaoTrialError> {
     let threads = threads.clamp(1, 64);
     let next = std::sync::atomic::AtomicU64::new(0);
     let mut out: Vec<Result<NaoTrial, NaoTrialError>> = std::thread::scope(|s| {
@@ -175,13 +196,7 @@ pub fn run_many(
                             break mine;
                         }
                         let seed = seed0.wrapping_add(i);
-                        mine.push(run(
-                            robot_type,
-                            params,
-                            seed,
-                            duration_s,
-                            SimSettings::default(),
-                        ));
+                        mine.push(run(robot_type, params, seed, duration_s, settings));
                     }
                 })
             })
@@ -307,7 +322,17 @@ mod probe {
             let mut excess = vec![0.0f64; m.joints.len()];
             let mut when = 0.0;
             let mut c = 0;
-            let tr = run_observed(0, p, 1, 10.0, SimSettings::default(), &mut |sim, _| {
+            let mut settings = SimSettings::default();
+            if let Ok(v) = std::env::var("PROBE_PGS") {
+                settings.pgs_iterations = v.parse().unwrap();
+            }
+            if let Ok(v) = std::env::var("PROBE_SUBSTEPS") {
+                settings.substeps = v.parse().unwrap();
+            }
+            if let Ok(v) = std::env::var("PROBE_SOLVER") {
+                settings.solver_iterations = v.parse().unwrap();
+            }
+            let tr = run_observed(0, p, 1, 10.0, settings, &mut |sim, _| {
                 c += 1;
                 for (k, (j, a)) in m.joints.iter().zip(&sim.joint_angles()).enumerate() {
                     let e = (j.limits_rad.0 - a).max(a - j.limits_rad.1).max(0.0);
