@@ -325,6 +325,31 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             },
         ),
         (
+            "impulse joints, 2x10ms, pgs 12, welded",
+            SimSettings {
+                impulse_joints: true,
+                ..d
+            },
+        ),
+        (
+            "impulse joints, 4x5ms, 4 solver its",
+            SimSettings {
+                impulse_joints: true,
+                substeps: 4,
+                solver_iterations: 4,
+                ..d
+            },
+        ),
+        (
+            "impulse joints, 10x2ms, 8 solver its",
+            SimSettings {
+                impulse_joints: true,
+                substeps: 10,
+                solver_iterations: 8,
+                ..d
+            },
+        ),
+        (
             "2x10ms, pgs 4, welded",
             SimSettings {
                 pgs_iterations: 4,

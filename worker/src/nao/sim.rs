@@ -10,10 +10,14 @@
 //! 1. **Frame**: the project frame of [`super::model`] (x forward, y left,
 //!    z up); gravity −9.81 along z.
 //! 2. **Joint formulation: multibody (reduced coordinates).** Measured in
-//!    `rapier-notes.md` and again by `naofarm bench sim`: impulse joints could
-//!    not hold the chain of 0.07–0.125 kg mass-only links under a 1.2 kg torso
-//!    at any affordable step; multibody joints have no drift and stand with one
-//!    solver iteration.
+//!    `rapier-notes.md` and again by `naofarm bench sim`, which builds the
+//!    same robot with impulse joints ([`SimSettings::impulse_joints`]): at
+//!    2 × 10 ms they run 200× real time standing but the robot collapses; at
+//!    4 × 5 ms with 4 solver iterations (≈35×) it still falls; at 10 × 2 ms
+//!    with 8 solver iterations it stands and walks, at 7×. The multibody
+//!    stands and walks at 2 × 10 ms with one solver iteration, 85–103× in the
+//!    same run: the chain of 0.07–0.125 kg mass-only links under a 1.2 kg
+//!    torso is what maximal coordinates cannot hold cheaply.
 //! 3. **Time step**: [`SimSettings::substeps`] physics steps inside each
 //!    20 ms cycle (default 2 × 10 ms, one solver iteration with 12 inner PGS
 //!    iterations each); commands are held for the whole cycle, as SimSpark
@@ -100,8 +104,11 @@ pub struct SimSettings {
     pub weld_upper_body: bool,
     /// Motor damping (velocity constraint stiffness), N·m·s/rad.
     pub motor_damping: f64,
-    /// Passive damping in every hinge, N·m·s/rad.
+    /// Passive damping in every hinge, N·m·s/rad (multibody joints only).
     pub joint_damping: f64,
+    /// Impulse joints (maximal coordinates) instead of a multibody: kept to
+    /// measure the decision of §9 item 2 in `bench sim`, not for trials.
+    pub impulse_joints: bool,
 }
 
 impl Default for SimSettings {
@@ -115,6 +122,7 @@ impl Default for SimSettings {
             weld_upper_body: true,
             motor_damping: 1000.0,
             joint_damping: 0.0,
+            impulse_joints: false,
         }
     }
 }
@@ -191,10 +199,11 @@ pub fn fallen(p: &Perception) -> bool {
     p.torso_position_m[2] < FALL_HEIGHT_M || p.torso_tilt_rad > FALL_TILT_RAD
 }
 
-/// A motorised hinge in the multibody.
+/// A motorised hinge: a multibody link, or an impulse joint.
 #[derive(Debug, Clone, Copy)]
 struct Hinge {
     handle: MultibodyJointHandle,
+    impulse: Option<ImpulseJointHandle>,
     link: usize,
     max_speed: f32,
 }
@@ -431,14 +440,26 @@ impl Sim {
                 .motor_velocity(0.0, settings.motor_damping as f32)
                 .motor_max_force(MAX_TORQUE_NM as f32)
                 .contacts_enabled(false);
+            let max_speed = joint.max_speed_rad_s as f32;
+            if settings.impulse_joints {
+                let handle = world.impulse_joints.insert(*p, *c, builder, true);
+                hinges[j] = Some(Hinge {
+                    handle: MultibodyJointHandle::invalid(),
+                    impulse: Some(handle),
+                    link: 0,
+                    max_speed,
+                });
+                continue;
+            }
             let handle = world
                 .multibody_joints
                 .insert(*p, *c, builder, true)
                 .ok_or_else(|| SimError::Settings(format!("joint {} closes a loop", joint.name)))?;
             hinges[j] = Some(Hinge {
                 handle,
+                impulse: None,
                 link: 0,
-                max_speed: joint.max_speed_rad_s as f32,
+                max_speed,
             });
         }
         let Some(root_joint) = hinges.iter().flatten().next().map(|h: &Hinge| h.handle) else {
@@ -462,7 +483,9 @@ impl Sim {
         };
         let torso_pose =
             motions[0] * nalgebra::Translation3::from(Vector3::from(model.bodies[0].centre));
-        sim.pose_multibody(&angles, &torso_pose)?;
+        if !settings.impulse_joints {
+            sim.pose_multibody(&angles, &torso_pose)?;
+        }
         Ok(sim)
     }
 
@@ -543,6 +566,24 @@ impl Sim {
     #[must_use]
     pub fn joint_angles(&self) -> Vec<f64> {
         let mut out = self.welded_angles.clone();
+        if self.settings.impulse_joints {
+            // The twist of child relative to parent about the joint axis (the
+            // zero pose has every body frame aligned with the world).
+            let g = self.body_motions();
+            for (j, joint) in self.model.joints.iter().enumerate() {
+                if self.hinges[j].is_none() {
+                    continue;
+                }
+                let rel = g[joint.parent].rotation.inverse() * g[joint.child].rotation;
+                let q = rel.quaternion();
+                let twist = q.imag().dot(&Vector3::from(joint.axis));
+                out[j] = 2.0 * twist.atan2(q.w);
+                if out[j] > std::f64::consts::PI {
+                    out[j] -= std::f64::consts::TAU;
+                }
+            }
+            return out;
+        }
         let Some((mb, _)) = self.world.multibody_joints.get(self.root_joint) else {
             return out;
         };
@@ -570,6 +611,20 @@ impl Sim {
             }
         }
         let damping = self.settings.motor_damping as f32;
+        for (h, c) in self.hinges.iter().zip(commands) {
+            let Some(Hinge {
+                impulse: Some(ih),
+                max_speed,
+                ..
+            }) = h
+            else {
+                continue;
+            };
+            let v = (*c as f32).clamp(-max_speed, *max_speed);
+            if let Some(joint) = self.world.impulse_joints.get_mut(*ih, true) {
+                joint.data.set_motor_velocity(JointAxis::AngX, v, damping);
+            }
+        }
         if let Some((mb, _)) = self.world.multibody_joints.get_mut(self.root_joint) {
             for (h, c) in self.hinges.iter().zip(commands) {
                 let Some(h) = h else { continue };
@@ -758,18 +813,21 @@ mod tests {
 
     #[test]
     fn rapier_pose_matches_forward_kinematics() {
-        for weld in [false, true] {
+        for (weld, impulse) in [(false, false), (true, false), (true, true)] {
             let m = model(4);
             let q = standing_angles(&m);
             let settings = SimSettings {
                 weld_upper_body: weld,
+                impulse_joints: impulse,
                 ..SimSettings::default()
             };
             let sim = Sim::new(&m, settings, &Start::upright(q.clone())).unwrap();
             let ours = sim.body_motions();
             let angles = sim.joint_angles();
+            // Impulse joints read angles back from f32 body rotations.
+            let tol = if impulse { 1e-5 } else { 1e-6 };
             for (a, b) in angles.iter().zip(&q) {
-                assert!((a - b).abs() < 1e-6, "{a} {b}");
+                assert!((a - b).abs() < tol, "{a} {b} (impulse {impulse})");
             }
             let root = ours[0];
             let fk = kinematics::body_motions(&m, &q, &root);
