@@ -33,9 +33,13 @@ enum Command {
         /// Local workers to start (each with one slot); default: one per core.
         #[arg(long)]
         workers: Option<u32>,
-        /// Print one JSON line per decided iteration instead of the progress view.
+        /// Print one JSON line per event instead of the progress view.
         #[arg(long)]
         json: bool,
+        /// The loopback endpoint to serve on (default: a free port), e.g. tcp/127.0.0.1:7447,
+        /// so that `naofarm watch` can be pointed at it.
+        #[arg(long, value_name = "ENDPOINT")]
+        listen: Option<String>,
     },
     /// The coordinator alone (cluster use): owns the run, its journal and dispatch.
     Coordinator {
@@ -106,7 +110,12 @@ enum Command {
 pub fn dispatch(cli: Cli) -> Result<(), Failure> {
     match cli.command {
         Command::Check { experiment, json } => check(&experiment, json),
-        Command::Run { job, workers, json } => crate::farm::run(&job, workers, json),
+        Command::Run {
+            job,
+            workers,
+            json,
+            listen,
+        } => crate::farm::run(&job, workers, json, listen.as_deref()),
         Command::Coordinator { job, net, json } => crate::farm::coordinator(&job, &net, json),
         Command::Worker {
             net,

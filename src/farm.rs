@@ -233,7 +233,12 @@ pub fn worker(net: &NetArgs, slots: Option<u32>, min_trial_ms: u64) -> Result<()
 }
 
 /// `naofarm run`: coordinator and local workers in one process, over zenoh on loopback.
-pub fn run(job: &JobArgs, workers: Option<u32>, json: bool) -> Result<(), Failure> {
+pub fn run(
+    job: &JobArgs,
+    workers: Option<u32>,
+    json: bool,
+    listen: Option<&str>,
+) -> Result<(), Failure> {
     let n = workers.unwrap_or_else(|| {
         std::thread::available_parallelism()
             .ok()
@@ -243,8 +248,18 @@ pub fn run(job: &JobArgs, workers: Option<u32>, json: bool) -> Result<(), Failur
     if n == 0 {
         return Err(Failure::Usage(anyhow!("--workers must be at least 1")));
     }
-    let port = free_loopback_port().map_err(Failure::Job)?;
-    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let endpoint = match listen {
+        Some(e) if e.starts_with("tcp/127.") || e.starts_with("tcp/[::1]") => e.to_string(),
+        Some(e) => {
+            return Err(Failure::Usage(anyhow!(
+                "--listen `{e}`: `run` serves on loopback only (tcp/127.0.0.1:PORT); use `coordinator` and `worker` for a cluster"
+            )))
+        }
+        None => format!(
+            "tcp/127.0.0.1:{}",
+            free_loopback_port().map_err(Failure::Job)?
+        ),
+    };
     eprintln!("zenoh on {endpoint}; watch from another terminal with `naofarm watch RUN --connect {endpoint}`");
     let coord_net = NetArgs {
         listen: vec![endpoint.clone()],
