@@ -4,17 +4,8 @@ use std::path::Path;
 
 use anyhow::anyhow;
 use coordinator::{evolve::DecidedIteration, run::read_run};
-use protocol::Decision;
 
 use crate::cli::{emit, Failure};
-
-fn decision(d: Decision) -> &'static str {
-    match d {
-        Decision::Accept => "ACCEPT",
-        Decision::Equivalent => "EQUIVALENT",
-        Decision::Reject => "REJECT",
-    }
-}
 
 fn opt(v: Option<f64>) -> serde_json::Value {
     v.map_or(serde_json::Value::Null, serde_json::Value::from)
@@ -50,7 +41,7 @@ pub fn history(dir: &Path, json: bool, csv: bool) -> Result<(), Failure> {
                     "my": opt(d.stats.my),
                     "ex": opt(d.stats.ex),
                     "ey": opt(d.stats.ey),
-                    "decision": decision(d.decision),
+                    "decision": d.decision.as_str(),
                     "best": is_best(d),
                 })
             })
@@ -73,7 +64,7 @@ pub fn history(dir: &Path, json: bool, csv: bool) -> Result<(), Failure> {
         row.extend(d.params.iter().map(f64::to_string));
         row.push(d.stats.s.to_string());
         row.extend([d.stats.mx, d.stats.my, d.stats.ex, d.stats.ey].map(cell));
-        row.push(decision(d.decision).to_string());
+        row.push(d.decision.as_str().to_string());
         row.push(is_best(d).to_string());
         out += &(row.join(sep) + "\n");
     }

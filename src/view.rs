@@ -11,10 +11,7 @@
 use std::{collections::BTreeSet, time::Instant};
 
 use indicatif::{ProgressBar, ProgressStyle};
-use protocol::{
-    wire::{IterationResult, RunStatus, TrialOutcome},
-    Decision,
-};
+use protocol::wire::{IterationResult, RunStatus, TrialOutcome};
 
 /// A view of one run.
 pub struct View {
@@ -23,14 +20,6 @@ pub struct View {
     seen: BTreeSet<u64>,
     started: Instant,
     decided_at_start: Option<u64>,
-}
-
-fn decision(d: Decision) -> &'static str {
-    match d {
-        Decision::Accept => "ACCEPT",
-        Decision::Equivalent => "EQUIVALENT",
-        Decision::Reject => "REJECT",
-    }
 }
 
 fn metres(v: Option<f64>) -> String {
@@ -112,7 +101,7 @@ impl View {
             self.line(&format!(
                 "iteration {:>4} {:<10} s {:.2} mx {} my {} ex {}",
                 r.iteration,
-                decision(r.decision),
+                r.decision.as_str(),
                 r.stats.s,
                 metres(r.stats.mx),
                 metres(r.stats.my),

@@ -310,6 +310,18 @@ pub enum Decision {
     Reject,
 }
 
+impl Decision {
+    /// The documented spelling: `ACCEPT`, `EQUIVALENT` or `REJECT`.
+    #[must_use]
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Accept => "ACCEPT",
+            Self::Equivalent => "EQUIVALENT",
+            Self::Reject => "REJECT",
+        }
+    }
+}
+
 /// An iteration's statistics (evolve.md: m and e over successful trials).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Stats {
