@@ -201,22 +201,33 @@ async fn follow(
     tokio::pin!(shutdown);
     // When the coordinator's token goes, its last messages may still be on
     // the way (declarations overtake data): wait for them this long.
-    let mut gone: Option<tokio::time::Instant> = None;
+    // The run ends when the coordinator says it finished or its token goes;
+    // results may still be on the way (other keys, other queues): wait for
+    // every planned iteration this long before calling the report incomplete.
+    let mut ending: Option<(tokio::time::Instant, bool)> = None; // (deadline, finished)
     let far = tokio::time::Instant::now() + Duration::from_secs(86_400 * 365);
+    let grace = Duration::from_secs(3);
     loop {
+        if let Some((_, finished)) = ending {
+            if view.reported() as u64 >= last.planned {
+                if !finished {
+                    last.decided = last.planned;
+                    last.finished = true;
+                    view.status(&last);
+                }
+                view.finish(&last, serde_json::json!({}));
+                return Ok(());
+            }
+        }
         tokio::select! {
+            // Results before statuses: a finished status must not overtake
+            // the last result in this loop.
+            biased;
             s = results.recv_async() => {
                 let s = s.map_err(zerr)?;
                 match IterationResult::from_json(&String::from_utf8_lossy(&s.payload().to_bytes())) {
                     Ok(r) if r.run == run => {
                         view.decided(&r);
-                        if gone.is_some() && view.reported() as u64 >= last.planned {
-                            last.decided = last.planned;
-                            last.finished = true;
-                            view.status(&last);
-                            view.finish(&last, serde_json::json!({}));
-                            return Ok(());
-                        }
                     }
                     Ok(r) => tracing::warn!(run = %r.run, "ignored a result of another run"),
                     Err(e) => tracing::warn!(error = %e, "ignored a malformed result"),
@@ -235,8 +246,7 @@ async fn follow(
                     Ok(st) if st.run == run => {
                         view.status(&st);
                         if st.finished {
-                            view.finish(&st, serde_json::json!({}));
-                            return Ok(());
+                            ending = Some((tokio::time::Instant::now() + grace, true));
                         }
                         last = st;
                     }
@@ -246,17 +256,26 @@ async fn follow(
             }
             s = coordinator.recv_async() => {
                 let s = s.map_err(zerr)?;
-                if s.kind() == SampleKind::Delete && gone.is_none() {
-                    gone = Some(tokio::time::Instant::now() + Duration::from_secs(3));
+                if s.kind() == SampleKind::Delete && ending.is_none() {
+                    ending = Some((tokio::time::Instant::now() + grace, false));
                 }
             }
-            () = tokio::time::sleep_until(gone.unwrap_or(far)) => {
+            () = tokio::time::sleep_until(ending.map_or(far, |e| e.0)) => {
                 view.abandon();
-                return Err(Failure::Job(anyhow!(
-                    "the coordinator of run `{run}` stopped after {} of {} iterations",
-                    view.reported(),
-                    last.planned
-                )));
+                let finished = ending.is_some_and(|e| e.1);
+                return Err(Failure::Job(if finished {
+                    anyhow!(
+                        "run `{run}` finished, but only {} of its {} results reached this watcher",
+                        view.reported(),
+                        last.planned
+                    )
+                } else {
+                    anyhow!(
+                        "the coordinator of run `{run}` stopped after {} of {} iterations",
+                        view.reported(),
+                        last.planned
+                    )
+                }));
             }
             _ = &mut shutdown => {
                 view.abandon();
