@@ -325,6 +325,14 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             },
         ),
         (
+            "1x20ms, pgs 40, welded",
+            SimSettings {
+                substeps: 1,
+                pgs_iterations: 40,
+                ..d
+            },
+        ),
+        (
             "impulse joints, 2x10ms, pgs 12, welded",
             SimSettings {
                 impulse_joints: true,
