@@ -11,7 +11,7 @@
 use std::{collections::BTreeSet, time::Instant};
 
 use indicatif::{ProgressBar, ProgressStyle};
-use protocol::wire::{IterationResult, RunStatus, TrialOutcome};
+use protocol::wire::{Best, IterationResult, RunStatus, TrialOutcome};
 
 /// A view of one run.
 pub struct View {
@@ -31,6 +31,19 @@ fn params(p: &[(String, f64)]) -> String {
         .map(|(n, v)| format!("{n} = {v:.4}"))
         .collect::<Vec<_>>()
         .join(", ")
+}
+
+/// ν′ in one line: its iteration, statistics (m) and, after `sep`, its parameters.
+fn best_line(b: &Best, sep: &str) -> String {
+    format!(
+        "iteration {} s {:.2} mx {} my {} ex {}{sep}{}",
+        b.iteration,
+        b.stats.s,
+        metres(b.stats.mx),
+        metres(b.stats.my),
+        metres(b.stats.ex),
+        params(&b.params)
+    )
 }
 
 fn json_of(text: &str) -> serde_json::Value {
@@ -146,15 +159,7 @@ impl View {
             s.accepts, s.equivalents, s.rejects, s.trials_per_s, s.workers
         ));
         self.bar.set_prefix(match &s.best {
-            Some(b) => format!(
-                "best: iteration {} s {:.2} mx {} my {} ex {} | {}",
-                b.iteration,
-                b.stats.s,
-                metres(b.stats.mx),
-                metres(b.stats.my),
-                metres(b.stats.ex),
-                params(&b.params)
-            ),
+            Some(b) => format!("best: {}", best_line(b, " | ")),
             None => "best: none accepted yet".to_string(),
         });
     }
@@ -172,15 +177,7 @@ impl View {
         }
         self.bar.finish_and_clear();
         match &s.best {
-            Some(b) => println!(
-                "Optim.1 (nu', iteration {}): s {:.2} mx {} m my {} m ex {} m\n  {}",
-                b.iteration,
-                b.stats.s,
-                metres(b.stats.mx),
-                metres(b.stats.my),
-                metres(b.stats.ex),
-                params(&b.params)
-            ),
+            Some(b) => println!("Optim.1 (nu'): {}", best_line(b, "\n  ")),
             None => println!("Optim.1: no parameter set was accepted"),
         }
         println!("Optim.2 (CLOP's mean):\n  {}", params(&s.optim2));

@@ -739,13 +739,7 @@ n_mcmc = 100
         let out = dir.join("run");
         // No worker yet: the coordinator cannot finish before the garbage is in.
         let mut c = Coordinator::start(&exp, &out, port, 30.0);
-        let mut cfg = zenoh::Config::default();
-        cfg.insert_json5("scouting/multicast/enabled", "false")
-            .unwrap();
-        cfg.insert_json5("listen/endpoints", "[]").unwrap();
-        cfg.insert_json5("connect/endpoints", &format!("[\"tcp/127.0.0.1:{port}\"]"))
-            .unwrap();
-        let session = zenoh::open(cfg).wait().unwrap();
+        let session = session_to(port);
         // Wait until the coordinator is reachable (its status answers): by then
         // its subscriptions are known to this session and puts are routed.
         let deadline = Instant::now() + TIMEOUT;

@@ -316,14 +316,21 @@ impl Run {
     }
 }
 
-/// Reads an earlier run's H and ν′ for `--from RUN_DIR` (its own imports included).
-pub fn load_history(dir: &Path) -> Result<Imported, RunError> {
+/// Reads a run's journal without opening it for writing (a torn tail is
+/// skipped, not repaired): its path and records.
+fn read_journal(dir: &Path) -> Result<(std::path::PathBuf, crate::journal::Replay), RunError> {
     let path = Journal::path_in(dir);
     let bytes = std::fs::read(&path).map_err(|cause| JournalError::Io {
         path: path.clone(),
         cause,
     })?;
     let replay = Journal::parse(&path, &bytes)?;
+    Ok((path, replay))
+}
+
+/// Reads an earlier run's H and ν′ for `--from RUN_DIR` (its own imports included).
+pub fn load_history(dir: &Path) -> Result<Imported, RunError> {
+    let (_, replay) = read_journal(dir)?;
     let mut out = Imported::default();
     for rec in replay.records {
         match rec {
@@ -343,12 +350,7 @@ pub fn load_history(dir: &Path) -> Result<Imported, RunError> {
 /// A finished or running run as its journal tells it: the effective experiment
 /// and the decided history (for `naofarm history`). Reading never writes.
 pub fn read_run(dir: &Path) -> Result<(Experiment, Vec<DecidedIteration>), RunError> {
-    let path = Journal::path_in(dir);
-    let bytes = std::fs::read(&path).map_err(|cause| JournalError::Io {
-        path: path.clone(),
-        cause,
-    })?;
-    let replay = Journal::parse(&path, &bytes)?;
+    let (path, replay) = read_journal(dir)?;
     let mut exp = None;
     let mut decided = Vec::new();
     for rec in replay.records {
