@@ -3,7 +3,8 @@
 //!
 //! Modules: [`clop`] (the optimiser, ask/tell), [`problems`] (CLOP's artificial
 //! test problems), [`bench`] (the CLOP benchmark harness), [`cmaes`] (its
-//! CMA-ES baseline).
+//! CMA-ES baseline), [`tune`] (local tuning of any noisy program with CLOP:
+//! evaluator processes and a replayable log).
 //!
 //! The optimiser and the loop must not do I/O, read a clock or draw from an
 //! unseeded random stream; side effects (journal, publishing, progress) hang
@@ -18,3 +19,4 @@ pub mod journal;
 pub mod problems;
 pub mod run;
 pub mod service;
+pub mod tune;
