@@ -180,7 +180,7 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         };
     }
     let t0 = Instant::now();
-    let runs = trial::run_many_with(
+    let runs = trial::run_many(
         a.robot_type,
         &params,
         a.seed,

@@ -153,28 +153,8 @@ pub fn run_observed(
 }
 
 /// Runs `n` trials of one parameter set on up to `threads` threads, seeds
-/// `seed0, seed0 + 1, …`; results in seed order whatever the threads.
+/// `seed0, seed0 + 1, …` with physics `settings`; results in seed order whatever the threads.
 pub fn run_many(
-    robot_type: u8,
-    params: &[(String, f64)],
-    seed0: u64,
-    n: u64,
-    duration_s: f64,
-    threads: usize,
-) -> Result<Vec<NaoTrial>, NaoTrialError> {
-    run_many_with(
-        robot_type,
-        params,
-        seed0,
-        n,
-        duration_s,
-        threads,
-        SimSettings::default(),
-    )
-}
-
-/// [`run_many`] with other physics settings (to compare settings on the walk).
-pub fn run_many_with(
     robot_type: u8,
     params: &[(String, f64)],
     seed0: u64,
@@ -223,7 +203,7 @@ mod tests {
     /// mx ≥ 1.5 m in 10 s, my/mx < 0.25) with a spread (ex > 0).
     #[test]
     fn the_expert_set_walks() {
-        let ts = run_many(0, &[], 1000, 100, 10.0, 2).unwrap();
+        let ts = run_many(0, &[], 1000, 100, 10.0, 2, SimSettings::default()).unwrap();
         let ok: Vec<&NaoTrial> = ts.iter().filter(|t| !t.fell).collect();
         let n = ok.len() as f64;
         let s = n / ts.len() as f64;
@@ -235,7 +215,7 @@ mod tests {
         assert!(my / mx < 0.25, "my/mx = {}", my / mx);
         assert!(ex > 0.0);
         // Seed order whatever the threads.
-        let again = run_many(0, &[], 1000, 4, 10.0, 1).unwrap();
+        let again = run_many(0, &[], 1000, 4, 10.0, 1, SimSettings::default()).unwrap();
         assert_eq!(&ts[..4], &again[..]);
     }
 
@@ -286,7 +266,7 @@ mod tests {
         let mut falls = 0;
         for c in corners {
             let p: Vec<(String, f64)> = c.iter().map(|(n, v)| ((*n).to_string(), *v)).collect();
-            let ts = run_many(0, &p, 0, 4, 10.0, 2).unwrap();
+            let ts = run_many(0, &p, 0, 4, 10.0, 2, SimSettings::default()).unwrap();
             falls += ts.iter().filter(|t| t.fell).count();
         }
         assert!(falls > 0);
