@@ -213,6 +213,7 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             "ex": s.ex,
             "ey": s.ey,
             "trials": runs,
+            "diverged": runs.iter().filter(|t| t.diverged).count(),
             "wall_s": wall,
         });
         println!("{v}");
@@ -230,6 +231,10 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             f(s.ex),
             f(s.ey)
         );
+        let diverged = runs.iter().filter(|t| t.diverged).count();
+        if diverged > 0 {
+            println!("{diverged} of the falls were the physics diverging (counted as falls, no distance)");
+        }
         println!(
             "{:.1} trials/s on {threads} threads ({wall:.2} s wall)",
             a.trials as f64 / wall

@@ -42,6 +42,9 @@ pub struct NaoTrial {
     pub y: f64,
     /// Simulated time of the fall, s.
     pub fall_time_s: Option<f64>,
+    /// Whether the fall was the physics diverging ([`SimError::Diverged`]),
+    /// counted as a fall with no distance.
+    pub diverged: bool,
     /// Simulated time run, s.
     pub sim_time_s: f64,
 }
@@ -129,6 +132,7 @@ pub fn run_observed(
                     x: 0.0,
                     y: 0.0,
                     fall_time_s: Some(t),
+                    diverged: true,
                     sim_time_s: t,
                 });
             }
@@ -148,6 +152,7 @@ pub fn run_observed(
         x: p[0] - p0[0],
         y: p[1] - p0[1],
         fall_time_s,
+        diverged: false,
         sim_time_s: perception.time_s,
     })
 }
