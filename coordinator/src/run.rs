@@ -134,14 +134,19 @@ impl Run {
             }
             .into());
         };
-        let mine = effective_json(&exp);
-        if experiment_json != mine {
-            let why = match serde_json::from_str::<Experiment>(&experiment_json) {
+        // Compared as experiments, not as text: a journal written before a
+        // field existed reads it at its default.
+        let theirs = serde_json::from_str::<Experiment>(&experiment_json);
+        if !matches!(&theirs, Ok(t) if *t == exp) {
+            let why = match theirs {
                 Ok(theirs) if theirs.name != exp.name => {
                     format!("run `{}`, not `{}`", theirs.name, exp.name)
                 }
                 Ok(theirs) if theirs.seed != exp.seed => {
                     format!("seed {}, not {}", theirs.seed, exp.seed)
+                }
+                Ok(theirs) if theirs.physics != exp.physics => {
+                    format!("physics {:?}, not {:?}", theirs.physics, exp.physics)
                 }
                 Ok(_) => "its settings differ".to_string(),
                 Err(e) => format!("unreadable header: {e}"),
@@ -300,6 +305,7 @@ impl Run {
             duration_s: exp.trial_duration_s,
             params: exp.full_params(&opened.params),
             dispatch,
+            physics: exp.physics,
         }
     }
 
@@ -675,6 +681,42 @@ n_mcmc = 200
         let other = EXP.replace("seed = 42", "seed = 43");
         let e = Run::open(&dir, Experiment::from_toml(&other).unwrap(), &other, None).unwrap_err();
         assert!(e.to_string().contains("another experiment"), "{e}");
+        let finer = format!("{EXP}\n[physics]\nsubsteps = 8\n");
+        let e = Run::open(&dir, Experiment::from_toml(&finer).unwrap(), &finer, None).unwrap_err();
+        assert!(e.to_string().contains("physics"), "{e}");
+    }
+
+    /// A journal header written before `[physics]` existed resumes at the
+    /// default physics; the run's trial requests carry the experiment's.
+    #[test]
+    fn physics_reach_the_requests_and_old_headers_read_the_default() {
+        let dir = tmp("physics");
+        let (run, _) = Run::open(&dir, exp(), EXP, None).unwrap();
+        drop(run);
+        let (_, replay) = crate::journal::Journal::open(&dir).unwrap();
+        let Some(crate::journal::Record::Header {
+            experiment_json, ..
+        }) = replay.records.first()
+        else {
+            panic!("no header");
+        };
+        let mut v: serde_json::Value = serde_json::from_str(experiment_json).unwrap();
+        assert!(v.as_object_mut().unwrap().remove("physics").is_some());
+        let old: Experiment = serde_json::from_value(v).unwrap();
+        assert_eq!(old, exp());
+        let finer = format!("{EXP}\n[physics]\nsubsteps = 8\npgs_iterations = 6\n");
+        let fe = Experiment::from_toml(&finer).unwrap();
+        let (run, effects) = Run::open(&tmp("physics-b"), fe, &finer, None).unwrap();
+        let req = effects
+            .iter()
+            .find_map(|e| match e {
+                Effect::Dispatch(o, _) => Some(run.request(o, 0, 0)),
+                _ => None,
+            })
+            .unwrap();
+        assert_eq!(req.physics.substeps, 8);
+        assert_eq!(req.physics.pgs_iterations, 6);
+        assert_eq!(req.physics.solver_iterations, 1);
     }
 
     #[test]

@@ -179,6 +179,47 @@ impl Default for ClopSettings {
     }
 }
 
+/// How finely the workers' rapier3d integrates each 20 ms agent cycle of a
+/// NAO trial (`[physics]`; ignored by the synthetic model). The default is the
+/// measured balance of speed and fidelity (`naofarm bench sim`); finer steps
+/// keep joints closer to their stops when a gait leans on them, at a cost.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Physics {
+    /// Physics steps per 20 ms cycle (1..=50).
+    pub substeps: u32,
+    /// Rapier solver iterations per step (1..=16).
+    pub solver_iterations: u32,
+    /// Inner PGS iterations per solver iteration (1..=200).
+    pub pgs_iterations: u32,
+}
+
+impl Default for Physics {
+    fn default() -> Self {
+        Self {
+            substeps: 2,
+            solver_iterations: 1,
+            pgs_iterations: 12,
+        }
+    }
+}
+
+impl Physics {
+    /// Checks each count against its range; names the first one outside.
+    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        for (field, v, hi) in [
+            ("substeps", self.substeps, 50),
+            ("solver_iterations", self.solver_iterations, 16),
+            ("pgs_iterations", self.pgs_iterations, 200),
+        ] {
+            if v == 0 || v > hi {
+                return Err((field, format!("{v} is not in 1..={hi}")));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// A parsed, validated experiment.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -218,6 +259,9 @@ pub struct Experiment {
     /// CLOP settings.
     #[serde(default)]
     pub clop: ClopSettings,
+    /// Physics of the NAO trials.
+    #[serde(default)]
+    pub physics: Physics,
 }
 
 fn default_trials() -> u32 {
@@ -364,6 +408,9 @@ impl Experiment {
         if c.n_mcmc == 0 {
             return Err(invalid("clop.n_mcmc", "must be at least 1"));
         }
+        self.physics
+            .validate()
+            .map_err(|(field, m)| invalid(format!("physics.{field}"), m))?;
         Ok(())
     }
 
@@ -457,6 +504,7 @@ expert = -0.04
         assert_eq!(e.clop.h, 3.0);
         assert_eq!(e.model, TrialModel::Nao);
         assert_eq!(e.expert_values(), vec![-0.04]);
+        assert_eq!(e.physics, Physics::default());
     }
 
     #[test]
@@ -488,6 +536,21 @@ expert = -0.04
             ),
             ("name = \"t\"", "name = \"a/b\"", "name"),
             ("lower = -0.08", "lower = -0.5", "admissible range"),
+            (
+                "iterations = 5",
+                "iterations = 5\n[physics]\nsubsteps = 0",
+                "physics.substeps",
+            ),
+            (
+                "iterations = 5",
+                "iterations = 5\n[physics]\npgs_iterations = 500",
+                "physics.pgs_iterations",
+            ),
+            (
+                "iterations = 5",
+                "iterations = 5\n[physics]\ntimestep = 0.001",
+                "timestep",
+            ),
         ];
         for (from, to, needle) in cases {
             let text = GOOD.replacen(from, to, 1);

@@ -16,7 +16,7 @@ pub mod keys;
 pub mod params;
 pub mod wire;
 
-pub use experiment::{Experiment, ExperimentError, ParamKind, ParamSpec, TrialModel};
+pub use experiment::{Experiment, ExperimentError, ParamKind, ParamSpec, Physics, TrialModel};
 pub use wire::{
     Decision, DecodeError, IterationResult, RunStatus, Stats, TrialOutcome, TrialRequest,
     WireMessage, WorkerPresence, WIRE_VERSION,

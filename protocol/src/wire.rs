@@ -9,7 +9,7 @@
 
 use serde::{de::DeserializeOwned, Deserialize, Serialize};
 
-use crate::experiment::TrialModel;
+use crate::experiment::{Physics, TrialModel};
 
 /// Version of the envelope and message layout.
 pub const WIRE_VERSION: u8 = 1;
@@ -225,6 +225,8 @@ pub struct TrialRequest {
     pub params: Vec<(String, f64)>,
     /// Dispatch number; a re-dispatched trial gets a new one.
     pub dispatch: u64,
+    /// How finely the NAO's physics integrates (the experiment's `[physics]`).
+    pub physics: Physics,
 }
 
 impl WireMessage for TrialRequest {
@@ -242,6 +244,7 @@ impl WireMessage for TrialRequest {
                 format!("{} is not in (0, 3600]", self.duration_s),
             ));
         }
+        self.physics.validate()?;
         param_list("params", &self.params)
     }
 }
@@ -520,9 +523,11 @@ mod tests {
     proptest! {
         #[test]
         fn trial_request_round_trips(run in run(), i in any::<u64>(), k in any::<u32>(), seed in any::<u64>(),
-                                     d in 0.1f64..100.0, ps in params(), t in 0u8..5, disp in any::<u64>()) {
+                                     d in 0.1f64..100.0, ps in params(), t in 0u8..5, disp in any::<u64>(),
+                                     sub in 1u32..=50, its in 1u32..=16, pgs in 1u32..=200) {
+            let physics = Physics { substeps: sub, solver_iterations: its, pgs_iterations: pgs };
             let m = TrialRequest { run, iteration: i, trial: k, seed, model: TrialModel::Synthetic,
-                                   robot_type: t, duration_s: d, params: ps, dispatch: disp };
+                                   robot_type: t, duration_s: d, params: ps, dispatch: disp, physics };
             prop_assert_eq!(TrialRequest::decode(&m.encode()), Ok(m));
         }
 
@@ -643,8 +648,19 @@ mod tests {
             duration_s: 10.0,
             params: vec![("ThighRelHip2_Z".into(), 0.5)],
             dispatch: 0,
+            physics: Physics::default(),
         };
         let e = TrialRequest::decode(&r.encode()).unwrap_err().to_string();
         assert!(e.contains("ThighRelHip2_Z"), "{e}");
+        let r = TrialRequest {
+            params: vec![("ThighRelHip2_Z".into(), -0.04)],
+            physics: Physics {
+                substeps: 0,
+                ..Physics::default()
+            },
+            ..r
+        };
+        let e = TrialRequest::decode(&r.encode()).unwrap_err().to_string();
+        assert!(e.contains("substeps"), "{e}");
     }
 }

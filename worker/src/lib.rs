@@ -48,7 +48,12 @@ pub fn run_trial(req: &TrialRequest) -> Result<TrialRun, TrialError> {
                 &req.params,
                 req.seed,
                 req.duration_s,
-                nao::sim::SimSettings::default(),
+                nao::sim::SimSettings {
+                    substeps: req.physics.substeps,
+                    solver_iterations: req.physics.solver_iterations as usize,
+                    pgs_iterations: req.physics.pgs_iterations as usize,
+                    ..nao::sim::SimSettings::default()
+                },
             )
             .map_err(|e| TrialError::Model(e.to_string()))?;
             Ok(TrialRun {
@@ -59,5 +64,44 @@ pub fn run_trial(req: &TrialRequest) -> Result<TrialRun, TrialError> {
                 sim_time_s: t.sim_time_s,
             })
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::Physics;
+
+    fn request(physics: Physics) -> TrialRequest {
+        TrialRequest {
+            run: "r".into(),
+            iteration: 0,
+            trial: 0,
+            seed: 3,
+            model: TrialModel::Nao,
+            robot_type: 0,
+            duration_s: 2.0,
+            params: vec![],
+            dispatch: 0,
+            physics,
+        }
+    }
+
+    #[test]
+    fn the_experiments_physics_drive_the_simulation() {
+        let d = Physics::default();
+        let s = nao::sim::SimSettings::default();
+        assert_eq!(
+            (
+                d.substeps,
+                d.solver_iterations as usize,
+                d.pgs_iterations as usize
+            ),
+            (s.substeps, s.solver_iterations, s.pgs_iterations)
+        );
+        let coarse = run_trial(&request(d)).unwrap();
+        assert_eq!(coarse, run_trial(&request(d)).unwrap());
+        let fine = run_trial(&request(Physics { substeps: 4, ..d })).unwrap();
+        assert_ne!(coarse.x_m.to_bits(), fine.x_m.to_bits());
     }
 }
