@@ -305,7 +305,7 @@ mod probe {
         for p in &sets {
             let m = NaoModel::with_params(0, p).unwrap();
             let mut excess = vec![0.0f64; m.joints.len()];
-            let mut when = 0.0;
+            let mut when = vec![0.0f64; m.joints.len()];
             let mut c = 0;
             let mut settings = SimSettings::default();
             if let Ok(v) = std::env::var("PROBE_PGS") {
@@ -323,7 +323,7 @@ mod probe {
                     let e = (j.limits_rad.0 - a).max(a - j.limits_rad.1).max(0.0);
                     if e > excess[k] {
                         excess[k] = e;
-                        when = f64::from(c) * 0.02;
+                        when[k] = f64::from(c) * 0.02;
                     }
                 }
             })
@@ -336,8 +336,8 @@ mod probe {
             worst.push((
                 e.to_degrees(),
                 format!(
-                    "{} at {when:.2}s fell {:?} {:?}",
-                    model.joints[k].name, tr.fall_time_s, p
+                    "{} at {:.2}s fell {:?} {:?}",
+                    model.joints[k].name, when[k], tr.fall_time_s, p
                 ),
             ));
         }
