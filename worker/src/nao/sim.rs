@@ -51,6 +51,12 @@
 //!    ([`SimSettings::contact_hz`]), nearer ODE's stiff ground (kp 2e5 N/m)
 //!    than rapier's default 30–60 Hz, with which the feet sank and the walk
 //!    made 0.3–1.2 m of its planned 1.75 m.
+//!    Contact rows start 5 mm above the ground
+//!    ([`SimSettings::contact_prediction_m`]) instead of rapier's 2 cm: a
+//!    foot comes down at well under 0.5 m/s, 5 mm per 10 ms step, and a swing
+//!    foot within 2 cm of the ground no longer carries rows it does not use.
+//!    The expert walk is unchanged within its spread (40 trials: mx 1.782 m,
+//!    ex 0.044 against 1.786, 0.039) on 9 % fewer instructions.
 //! 8. **Mass-only bodies**: every body's mass and inertia are set explicitly
 //!    from the model (colliders have zero density), so hip1/hip2/ankle/
 //!    shoulder/elbow weigh what the spec says.
@@ -118,6 +124,9 @@ pub struct SimSettings {
     pub friction: f64,
     /// Contact spring natural frequency, Hz (damping ratio 10).
     pub contact_hz: f64,
+    /// How near the ground a collider gets contact rows before it touches
+    /// (rapier's speculative contacts), m.
+    pub contact_prediction_m: f64,
     /// Weld head and arms to the torso at their start angles.
     pub weld_upper_body: bool,
     /// Motor damping (velocity constraint stiffness), N·m·s/rad.
@@ -141,6 +150,7 @@ impl Default for SimSettings {
             pgs_iterations: 12,
             friction: 1.0,
             contact_hz: 500.0,
+            contact_prediction_m: 0.005,
             weld_upper_body: true,
             motor_damping: 1000.0,
             joint_damping: 0.0,
@@ -332,6 +342,7 @@ impl Sim {
             || settings.pgs_iterations == 0
             || !(settings.friction.is_finite() && settings.friction >= 0.0)
             || !(settings.contact_hz.is_finite() && settings.contact_hz > 0.0)
+            || !(settings.contact_prediction_m.is_finite() && settings.contact_prediction_m > 0.0)
             || !(settings.motor_damping.is_finite() && settings.motor_damping > 0.0)
             || !(settings.joint_damping.is_finite() && settings.joint_damping >= 0.0)
             || !(start.pitch_rad.is_finite() && start.roll_rad.is_finite())
@@ -358,6 +369,8 @@ impl Sim {
         world.integration_parameters.num_internal_pgs_iterations = settings.pgs_iterations;
         let contact = SpringCoefficients::new(settings.contact_hz as f32, 10.0);
         world.integration_parameters.contact_softness = contact;
+        world.integration_parameters.normalized_prediction_distance =
+            settings.contact_prediction_m as f32;
         world.integration_parameters.static_contact_softness = contact;
 
         let robot =
