@@ -44,7 +44,13 @@
 //!    iterations 0.85°, while 100 PGS iterations still leave 2.2°. Projecting
 //!    the joints back onto their stops after each step was tried and dropped:
 //!    holding the hip yaw-pitch, which the walk leans on, took the expert set
-//!    from 40/40 to 4/40 successes and blew up a deep-crouch set.
+//!    from 40/40 to 4/40 successes and blew up a deep-crouch set. So were
+//!    speculative stop rows (rapier's row engaged before the stop, its bias
+//!    turned into "travel at most the gap" by a negative-ERP softness): at a
+//!    heel strike the engaged row still gives way by ~1° in one step, as an
+//!    engaged row past the stop does — rapier solves contacts after joint rows
+//!    in each PGS sweep, and the stop loses to the ground. Finer steps
+//!    (`[physics]` of the experiment) are the lever that works.
 //! 6. **Friction**: Coulomb, coefficient 1.0 on feet and ground (average
 //!    rule), no force-dependent slip; trials may spread the ground value.
 //! 7. **Contact softness**: a 500 Hz contact spring, damping ratio 10
