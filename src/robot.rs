@@ -120,15 +120,19 @@ pub struct TrialArgs {
     /// Threads (default: cores).
     #[arg(long)]
     threads: Option<usize>,
-    /// Physics sub-steps per 20 ms cycle (default 2; see `bench sim`).
+    /// Physics sub-steps per 20 ms cycle, 1–50 (default 2; see `bench sim`).
     #[arg(long)]
     substeps: Option<u32>,
-    /// Rapier solver iterations per sub-step (default 1).
+    /// Rapier solver iterations per sub-step, 1–16 (default 1).
     #[arg(long)]
-    solver_iterations: Option<usize>,
-    /// Rapier PGS iterations per solver iteration (default 12).
+    solver_iterations: Option<u32>,
+    /// Rapier PGS iterations per solver iteration, 1–200 (default 12).
     #[arg(long)]
-    pgs_iterations: Option<usize>,
+    pgs_iterations: Option<u32>,
+    /// Record the first trial (seed --seed): every body's pose each 20 ms
+    /// cycle, as JSON lines, for a replay.
+    #[arg(long, value_name = "FILE")]
+    record: Option<std::path::PathBuf>,
     /// Machine-readable output with every trial.
     #[arg(long)]
     json: bool,
@@ -156,28 +160,18 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     let threads = a
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from));
-    let mut settings = SimSettings::default();
-    let bad = |what: &str| Failure::Usage(anyhow!("--{what} must be in 1..=64"));
-    if let Some(n) = a.substeps {
-        settings.substeps = if (1..=64).contains(&n) {
-            n
-        } else {
-            return Err(bad("substeps"));
-        };
-    }
-    if let Some(n) = a.solver_iterations {
-        settings.solver_iterations = if (1..=64).contains(&n) {
-            n
-        } else {
-            return Err(bad("solver-iterations"));
-        };
-    }
-    if let Some(n) = a.pgs_iterations {
-        settings.pgs_iterations = if (1..=64).contains(&n) {
-            n
-        } else {
-            return Err(bad("pgs-iterations"));
-        };
+    let d = protocol::Physics::default();
+    let physics = protocol::Physics {
+        substeps: a.substeps.unwrap_or(d.substeps),
+        solver_iterations: a.solver_iterations.unwrap_or(d.solver_iterations),
+        pgs_iterations: a.pgs_iterations.unwrap_or(d.pgs_iterations),
+    };
+    physics
+        .validate()
+        .map_err(|(field, m)| Failure::Usage(anyhow!("--{}: {m}", field.replace('_', "-"))))?;
+    let settings = SimSettings::with_physics(&physics);
+    if let Some(path) = &a.record {
+        record(path, a, &params, settings)?;
     }
     let t0 = Instant::now();
     let runs = trial::run_many(
@@ -240,6 +234,55 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             a.trials as f64 / wall
         );
     }
+    Ok(())
+}
+
+/// Writes the replay of trial `a.seed`: a header line (robot type, seed,
+/// parameters, body names and shapes), then one line per cycle with the time
+/// and every body's centre pose (x, y, z, qx, qy, qz, qw; world frame, m).
+fn record(
+    path: &std::path::Path,
+    a: &TrialArgs,
+    params: &[(String, f64)],
+    settings: SimSettings,
+) -> Result<(), Failure> {
+    use std::io::Write;
+    let file = std::fs::File::create(path)
+        .map_err(|e| Failure::Usage(anyhow!("--record {}: {e}", path.display())))?;
+    let mut out = std::io::BufWriter::new(file);
+    let model =
+        NaoModel::with_params(a.robot_type, params).map_err(|e| Failure::Usage(e.into()))?;
+    let header = serde_json::json!({
+        "robot_type": a.robot_type,
+        "seed": a.seed,
+        "params": params.iter().map(|(k, v)| (k.clone(), serde_json::json!(v))).collect::<serde_json::Map<_, _>>(),
+        "cycle_s": CYCLE_S,
+        "bodies": model.bodies.iter().map(|b| serde_json::json!({"name": b.name, "shape": b.shape})).collect::<Vec<_>>(),
+    });
+    let mut io = writeln!(out, "{header}");
+    let t = trial::run_observed(
+        a.robot_type,
+        params,
+        a.seed,
+        a.duration,
+        settings,
+        &mut |sim, p| {
+            if io.is_ok() {
+                let line = serde_json::json!({"t": p.time_s, "poses": sim.body_poses()});
+                io = writeln!(out, "{line}");
+            }
+        },
+    )
+    .map_err(|e| Failure::Job(e.into()))?;
+    io.and_then(|()| out.flush())
+        .map_err(|e| Failure::Job(anyhow!("--record {}: {e}", path.display())))?;
+    eprintln!(
+        "recorded seed {} ({} cycles{}) to {}",
+        a.seed,
+        (t.sim_time_s / CYCLE_S).round(),
+        if t.fell { ", fell" } else { "" },
+        path.display()
+    );
     Ok(())
 }
 

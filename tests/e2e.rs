@@ -1070,6 +1070,70 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
         assert_eq!(out.status.code(), Some(2), "{bad}");
         assert!(!out.stderr.is_empty());
     }
+    let out = naofarm()
+        .args(["trial", "--trials", "1", "--pgs-iterations", "500"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--pgs-iterations"));
+}
+
+#[test]
+fn trial_records_a_replay_of_its_first_trial() {
+    let f = scratch("record").join("replay.jsonl");
+    let out = succeed(
+        naofarm()
+            .args([
+                "trial",
+                "--json",
+                "--trials",
+                "2",
+                "--duration",
+                "1",
+                "--seed",
+                "4",
+            ])
+            .arg("--record")
+            .arg(&f),
+    );
+    let row: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let text = std::fs::read_to_string(&f).unwrap();
+    let lines: Vec<serde_json::Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let bodies = lines[0]["bodies"].as_array().unwrap().len();
+    assert_eq!(lines[0]["seed"], 4);
+    assert_eq!(bodies, 23, "type 0 has 23 bodies");
+    // One line per 20 ms cycle of the 1 s trial, every body's pose in each.
+    assert_eq!(lines.len(), 1 + 50);
+    for l in &lines[1..] {
+        let poses = l["poses"].as_array().unwrap();
+        assert_eq!(poses.len(), bodies);
+        assert!(poses
+            .iter()
+            .flat_map(|p| p.as_array().unwrap())
+            .all(|x| x.as_f64().unwrap().is_finite()));
+    }
+    // The recorded trial is the first of the row: same end of the torso.
+    let last = &lines[50]["poses"][0];
+    let first = &lines[1]["poses"][0];
+    let dx = last[0].as_f64().unwrap() - first[0].as_f64().unwrap();
+    let x = row["trials"][0]["x"].as_f64().unwrap();
+    assert!((dx - x).abs() < 0.05, "{dx} vs {x}");
+    let z = last[2].as_f64().unwrap();
+    assert!(z > 0.25 && z < 0.45, "torso at {z} m");
+    let out = naofarm()
+        .args([
+            "trial",
+            "--trials",
+            "1",
+            "--record",
+            "/nonexistent-dir/x.jsonl",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
 }
 
 #[test]

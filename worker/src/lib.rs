@@ -48,12 +48,7 @@ pub fn run_trial(req: &TrialRequest) -> Result<TrialRun, TrialError> {
                 &req.params,
                 req.seed,
                 req.duration_s,
-                nao::sim::SimSettings {
-                    substeps: req.physics.substeps,
-                    solver_iterations: req.physics.solver_iterations as usize,
-                    pgs_iterations: req.physics.pgs_iterations as usize,
-                    ..nao::sim::SimSettings::default()
-                },
+                nao::sim::SimSettings::with_physics(&req.physics),
             )
             .map_err(|e| TrialError::Model(e.to_string()))?;
             Ok(TrialRun {

@@ -166,6 +166,19 @@ impl Default for SimSettings {
     }
 }
 
+impl SimSettings {
+    /// The defaults with an experiment's `[physics]` counts.
+    #[must_use]
+    pub fn with_physics(physics: &protocol::Physics) -> Self {
+        Self {
+            substeps: physics.substeps,
+            solver_iterations: physics.solver_iterations as usize,
+            pgs_iterations: physics.pgs_iterations as usize,
+            ..Self::default()
+        }
+    }
+}
+
 /// Why a simulation could not be built or continued.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SimError {
