@@ -48,9 +48,11 @@
 //!    speculative stop rows (rapier's row engaged before the stop, its bias
 //!    turned into "travel at most the gap" by a negative-ERP softness): at a
 //!    heel strike the engaged row still gives way by ~1° in one step, as an
-//!    engaged row past the stop does — rapier solves contacts after joint rows
-//!    in each PGS sweep, and the stop loses to the ground. Finer steps
-//!    (`[physics]` of the experiment) are the lever that works.
+//!    engaged row past the stop does. Rapier solves contacts after joint rows
+//!    in each PGS sweep, but a rapier patched to solve the joint rows again
+//!    after the contacts did no better (5.2°), so the cause lies deeper in its
+//!    multibody solve; finer steps (the experiment's `[physics]`) are the
+//!    lever that works.
 //! 6. **Friction**: Coulomb, coefficient 1.0 on feet and ground (average
 //!    rule), no force-dependent slip; trials may spread the ground value.
 //! 7. **Contact softness**: a 500 Hz contact spring, damping ratio 10
