@@ -197,9 +197,10 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         })
         .collect();
     let s = stats(&results);
+    let diverged = runs.iter().filter(|t| t.diverged).count();
     if a.json {
         let v = serde_json::json!({
-            "params": params.iter().map(|(k, v)| (k.clone(), serde_json::json!(v))).collect::<serde_json::Map<_, _>>(),
+            "params": params_json(&params),
             "robot_type": a.robot_type,
             "s": s.s,
             "mx": s.mx,
@@ -207,7 +208,7 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             "ex": s.ex,
             "ey": s.ey,
             "trials": runs,
-            "diverged": runs.iter().filter(|t| t.diverged).count(),
+            "diverged": diverged,
             "wall_s": wall,
         });
         println!("{v}");
@@ -225,7 +226,6 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             f(s.ex),
             f(s.ey)
         );
-        let diverged = runs.iter().filter(|t| t.diverged).count();
         if diverged > 0 {
             println!("{diverged} of the falls were the physics diverging (counted as falls, no distance)");
         }
@@ -235,6 +235,14 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         );
     }
     Ok(())
+}
+
+/// A parameter set as a JSON object of name → value.
+fn params_json(params: &[(String, f64)]) -> serde_json::Map<String, serde_json::Value> {
+    params
+        .iter()
+        .map(|(k, v)| (k.clone(), serde_json::json!(v)))
+        .collect()
 }
 
 /// Writes the replay of trial `a.seed`: a header line (robot type, seed,
@@ -255,7 +263,7 @@ fn record(
     let header = serde_json::json!({
         "robot_type": a.robot_type,
         "seed": a.seed,
-        "params": params.iter().map(|(k, v)| (k.clone(), serde_json::json!(v))).collect::<serde_json::Map<_, _>>(),
+        "params": params_json(params),
         "cycle_s": CYCLE_S,
         "bodies": model.bodies.iter().map(|b| serde_json::json!({"name": b.name, "shape": b.shape})).collect::<Vec<_>>(),
     });
