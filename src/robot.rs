@@ -129,6 +129,10 @@ pub struct TrialArgs {
     /// Rapier PGS iterations per solver iteration, 1–200 (default 12).
     #[arg(long)]
     pgs_iterations: Option<u32>,
+    /// Reflected rotor inertia of every motorised hinge, kg·m², 0–0.1
+    /// (default 0: the league's robot has none).
+    #[arg(long)]
+    armature: Option<f64>,
     /// Record the first trial (seed --seed): every body's pose each 20 ms
     /// cycle, as JSON lines, for a replay.
     #[arg(long, value_name = "FILE")]
@@ -165,10 +169,12 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         substeps: a.substeps.unwrap_or(d.substeps),
         solver_iterations: a.solver_iterations.unwrap_or(d.solver_iterations),
         pgs_iterations: a.pgs_iterations.unwrap_or(d.pgs_iterations),
+        armature_kg_m2: a.armature.unwrap_or(d.armature_kg_m2),
     };
-    physics
-        .validate()
-        .map_err(|(field, m)| Failure::Usage(anyhow!("--{}: {m}", field.replace('_', "-"))))?;
+    physics.validate().map_err(|(field, m)| {
+        let flag = field.trim_end_matches("_kg_m2").replace('_', "-");
+        Failure::Usage(anyhow!("--{flag}: {m}"))
+    })?;
     let settings = SimSettings::with_physics(&physics);
     if let Some(path) = &a.record {
         record(path, a, &params, settings)?;

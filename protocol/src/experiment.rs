@@ -179,11 +179,12 @@ impl Default for ClopSettings {
     }
 }
 
-/// How finely the workers' rapier3d integrates each 20 ms agent cycle of a
-/// NAO trial (`[physics]`; ignored by the synthetic model). The default is the
-/// measured balance of speed and fidelity (`naofarm bench sim`); finer steps
-/// keep joints closer to their stops when a gait leans on them, at a cost.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+/// How the workers' rapier3d integrates each 20 ms agent cycle of a NAO trial
+/// (`[physics]`; ignored by the synthetic model). The default is the measured
+/// balance of speed and fidelity to the league (`naofarm bench sim`); finer
+/// steps, or a rotor inertia the league's robot does not have, keep joints
+/// closer to their stops when a gait leans on them.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Physics {
     /// Physics steps per 20 ms cycle (1..=50).
@@ -192,6 +193,9 @@ pub struct Physics {
     pub solver_iterations: u32,
     /// Inner PGS iterations per solver iteration (1..=200).
     pub pgs_iterations: u32,
+    /// Reflected rotor inertia added to every motorised hinge, kg·m² (0..=0.1;
+    /// MuJoCo's `armature`). The league's robot has none (0, the default).
+    pub armature_kg_m2: f64,
 }
 
 impl Default for Physics {
@@ -200,6 +204,7 @@ impl Default for Physics {
             substeps: 2,
             solver_iterations: 1,
             pgs_iterations: 12,
+            armature_kg_m2: 0.0,
         }
     }
 }
@@ -215,6 +220,10 @@ impl Physics {
             if v == 0 || v > hi {
                 return Err((field, format!("{v} is not in 1..={hi}")));
             }
+        }
+        let a = self.armature_kg_m2;
+        if !(a.is_finite() && (0.0..=0.1).contains(&a)) {
+            return Err(("armature_kg_m2", format!("{a} is not in [0, 0.1]")));
         }
         Ok(())
     }
@@ -550,6 +559,11 @@ expert = -0.04
                 "iterations = 5",
                 "iterations = 5\n[physics]\ntimestep = 0.001",
                 "timestep",
+            ),
+            (
+                "iterations = 5",
+                "iterations = 5\n[physics]\narmature_kg_m2 = nan",
+                "physics.armature_kg_m2",
             ),
         ];
         for (from, to, needle) in cases {

@@ -524,8 +524,8 @@ mod tests {
         #[test]
         fn trial_request_round_trips(run in run(), i in any::<u64>(), k in any::<u32>(), seed in any::<u64>(),
                                      d in 0.1f64..100.0, ps in params(), t in 0u8..5, disp in any::<u64>(),
-                                     sub in 1u32..=50, its in 1u32..=16, pgs in 1u32..=200) {
-            let physics = Physics { substeps: sub, solver_iterations: its, pgs_iterations: pgs };
+                                     sub in 1u32..=50, its in 1u32..=16, pgs in 1u32..=200, arm in 0.0f64..0.1) {
+            let physics = Physics { substeps: sub, solver_iterations: its, pgs_iterations: pgs, armature_kg_m2: arm };
             let m = TrialRequest { run, iteration: i, trial: k, seed, model: TrialModel::Synthetic,
                                    robot_type: t, duration_s: d, params: ps, dispatch: disp, physics };
             prop_assert_eq!(TrialRequest::decode(&m.encode()), Ok(m));

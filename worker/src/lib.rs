@@ -98,5 +98,12 @@ mod tests {
         assert_eq!(coarse, run_trial(&request(d)).unwrap());
         let fine = run_trial(&request(Physics { substeps: 4, ..d })).unwrap();
         assert_ne!(coarse.x_m.to_bits(), fine.x_m.to_bits());
+        assert_eq!(d.armature_kg_m2, s.armature_kg_m2);
+        let geared = run_trial(&request(Physics {
+            armature_kg_m2: 0.005,
+            ..d
+        }))
+        .unwrap();
+        assert_ne!(coarse.x_m.to_bits(), geared.x_m.to_bits());
     }
 }

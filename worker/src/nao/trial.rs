@@ -317,6 +317,9 @@ mod probe {
             if let Ok(v) = std::env::var("PROBE_SOLVER") {
                 settings.solver_iterations = v.parse().unwrap();
             }
+            if let Ok(v) = std::env::var("PROBE_ARMATURE") {
+                settings.armature_kg_m2 = v.parse().unwrap();
+            }
             let tr = run_observed(0, p, 1, 10.0, settings, &mut |sim, _| {
                 c += 1;
                 for (k, (j, a)) in m.joints.iter().zip(&sim.joint_angles()).enumerate() {
