@@ -67,17 +67,23 @@ fn clop(a: &ClopBenchArgs) -> Result<(), Failure> {
         rows.extend(bench::regret(p, &a.budgets, a.runs, a.seed, &algs, threads));
     }
     if a.json {
-        println!(
+        outln!(
             "{}",
             serde_json::to_string_pretty(&rows).map_err(|e| Failure::Job(e.into()))?
         );
     } else {
-        println!(
+        outln!(
             "{:<12} {:<8} {:>8} {:>5} {:>12} {:>12} {:>12}",
-            "problem", "algo", "budget", "runs", "mean regret", "median", "p90"
+            "problem",
+            "algo",
+            "budget",
+            "runs",
+            "mean regret",
+            "median",
+            "p90"
         );
         for r in &rows {
-            println!(
+            outln!(
                 "{:<12} {:<8} {:>8} {:>5} {:>12.5} {:>12.5} {:>12.5}",
                 r.problem,
                 format!("{:?}", r.algorithm).to_lowercase(),
@@ -90,14 +96,17 @@ fn clop(a: &ClopBenchArgs) -> Result<(), Failure> {
         }
     }
     if a.cost {
-        println!(
+        outln!(
             "{:<4} {:>6} {:>8} {:>16}",
-            "d", "n", "refresh", "µs per tell+ask"
+            "d",
+            "n",
+            "refresh",
+            "µs per tell+ask"
         );
         for d in [1, 5] {
             for rate in [0.1, 0.0] {
                 for r in bench::cost(d, &[100, 1000, 5000], rate, 20, a.seed) {
-                    println!(
+                    outln!(
                         "{:<4} {:>6} {:>8} {:>16.1}",
                         r.d,
                         r.n,

@@ -96,6 +96,9 @@ enum Command {
         #[arg(long)]
         csv: bool,
     },
+    /// Verify a run's journal (`check`) or copy its valid records into a new run (`salvage`).
+    #[command(subcommand)]
+    Journal(crate::journal::JournalCommand),
     /// Validate an experiment file and print it as parsed.
     Check {
         /// The experiment file (TOML).
@@ -125,6 +128,7 @@ pub fn dispatch(cli: Cli) -> Result<(), Failure> {
         Command::Watch(a) => crate::watch::watch(&a),
         Command::Clop(a) => crate::tune::clop(&a),
         Command::History { dir, json, csv } => crate::history::history(&dir, json, csv),
+        Command::Journal(j) => crate::journal::journal(j),
         Command::Bench(b) => crate::benches::bench(b),
         Command::Stand(a) => crate::robot::stand(&a),
         Command::Trial(a) => crate::robot::trial(&a),
@@ -174,12 +178,8 @@ pub enum BenchCommand {
 
 /// Writes `text` to stdout; a closed pipe (`| head`) ends quietly.
 pub fn emit(text: &str) -> Result<(), Failure> {
-    use std::io::Write;
-    let mut out = std::io::stdout().lock();
-    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
-        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(Failure::Job(e.into())),
-        _ => Ok(()),
-    }
+    crate::out::write(text);
+    Ok(())
 }
 
 /// Reads and validates an experiment file (a usage error when it is bad).
@@ -199,20 +199,27 @@ fn check(path: &Path, json: bool) -> Result<(), Failure> {
         let text = serde_json::to_string_pretty(&e)
             .context("encode JSON")
             .map_err(Failure::Job)?;
-        println!("{text}");
+        outln!("{text}");
         return Ok(());
     }
-    println!(
+    outln!(
         "experiment `{}` (seed {}, model {:?}, robot type {}, start {:?})",
-        e.name, e.seed, e.model, e.robot_type, e.start
+        e.name,
+        e.seed,
+        e.model,
+        e.robot_type,
+        e.start
     );
-    println!(
+    outln!(
         "  {} iterations x {} trials of {} s, pipeline depth {}",
-        e.iterations, e.trials_per_iteration, e.trial_duration_s, e.pipeline_depth
+        e.iterations,
+        e.trials_per_iteration,
+        e.trial_duration_s,
+        e.pipeline_depth
     );
-    println!("  parameters (L):");
+    outln!("  parameters (L):");
     for p in &e.parameter {
-        println!(
+        outln!(
             "    {:<36} {:<8} [{}, {}]  expert {}",
             p.name,
             format!("{:?}", p.kind).to_lowercase(),
@@ -222,18 +229,22 @@ fn check(path: &Path, json: bool) -> Result<(), Failure> {
         );
     }
     if !e.fixed.is_empty() {
-        println!("  fixed:");
+        outln!("  fixed:");
         for (k, v) in &e.fixed {
-            println!("    {k:<36} {v}");
+            outln!("    {k:<36} {v}");
         }
     }
     let k = &e.pickout;
-    println!(
+    outln!(
         "  pickOut: SUCCESS_RATE {} XY_RATIO {} alpha {} beta {} gamma {}",
-        k.success_rate, k.xy_ratio, k.alpha, k.beta, k.gamma
+        k.success_rate,
+        k.xy_ratio,
+        k.alpha,
+        k.beta,
+        k.gamma
     );
     let c = &e.clop;
-    println!(
+    outln!(
         "  CLOP: H {} DrawElo {} correlations {} prior {} refresh {} max weight iterations {} nMCMC {}",
         c.h,
         c.draw_elo,
@@ -304,36 +315,43 @@ fn model(robot_type: u8, params: &[String], json: bool) -> Result<(), Failure> {
             "morphology": mo,
             "joints": joints,
         });
-        println!(
+        outln!(
             "{}",
             serde_json::to_string_pretty(&v).map_err(|e| Failure::Job(e.into()))?
         );
         return Ok(());
     }
-    println!(
+    outln!(
         "NAO type {} (frame: x forward, y left, z up; torso-centred, zero pose)",
         mo.robot_type
     );
-    println!("  total mass        {:.4} kg", model.total_mass_kg());
-    println!(
+    outln!("  total mass        {:.4} kg", model.total_mass_kg());
+    outln!(
         "  thigh / tibia     {:.5} / {:.5} m",
         mo.thigh_m(),
         mo.tibia_m()
     );
-    println!("  hip to sole       {:.5} m", mo.hip_to_sole_m());
-    println!("  torso to sole     {:.5} m", mo.torso_to_sole_m());
-    println!("  hip width         {:.5} m", mo.hip_width_m());
+    outln!("  hip to sole       {:.5} m", mo.hip_to_sole_m());
+    outln!("  torso to sole     {:.5} m", mo.torso_to_sole_m());
+    outln!("  hip width         {:.5} m", mo.hip_width_m());
     let c = model.centre_of_mass();
-    println!(
+    outln!(
         "  centre of mass    ({:.4}, {:.4}, {:.4}) m",
-        c[0], c[1], c[2]
+        c[0],
+        c[1],
+        c[2]
     );
-    println!(
+    outln!(
         "  {:<6} {:<10} {:<10} {:>9} {:>9} {:>9}",
-        "joint", "parent", "child", "lower°", "upper°", "rad/s"
+        "joint",
+        "parent",
+        "child",
+        "lower°",
+        "upper°",
+        "rad/s"
     );
     for j in &model.joints {
-        println!(
+        outln!(
             "  {:<6} {:<10} {:<10} {:>9.1} {:>9.1} {:>9.4}",
             j.name,
             model.bodies[j.parent].name,

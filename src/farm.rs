@@ -3,7 +3,7 @@
 
 use std::time::Duration;
 
-use anyhow::{anyhow, Context};
+use anyhow::anyhow;
 use coordinator::{
     run::{load_history, Run},
     service::{self, Ended, Event, ServiceConfig},
@@ -64,24 +64,47 @@ fn open_run(job: &JobArgs) -> Result<(Run, Vec<coordinator::run::Effect>), Failu
         exp.model = TrialModel::parse(m).map_err(|e| Failure::Usage(anyhow!("--model: {e}")))?;
     }
     exp.validate().map_err(|e| Failure::Usage(e.into()))?;
-    if !(job.lease_s.is_finite() && job.lease_s > 0.0) {
+    if !(job.lease_s.is_finite() && (1.0..=86_400.0).contains(&job.lease_s)) {
         return Err(Failure::Usage(anyhow!(
-            "--lease-s must be a positive number of seconds"
+            "--lease-s {}: must be in [1, 86400] seconds",
+            job.lease_s
         )));
     }
     let imported = match &job.from {
-        Some(dir) => Some(
-            load_history(dir)
-                .with_context(|| format!("--from {}", dir.display()))
-                .map_err(Failure::Usage)?,
-        ),
+        Some(dir) => {
+            let from = load_history(dir, &exp).map_err(|e| match e {
+                coordinator::run::RunError::FromMismatch { .. } => Failure::Usage(e.into()),
+                e => Failure::Job(anyhow!("--from {}: {e}", dir.display())),
+            })?;
+            eprintln!(
+                "starting from {}: {} of its {} points lie inside this experiment's bounds{}",
+                dir.display(),
+                from.imported.history.len(),
+                from.total,
+                if from.best_kept {
+                    ""
+                } else {
+                    "; its best set does not, so ν′ starts undefined"
+                }
+            );
+            Some(from.imported)
+        }
         None => None,
     };
-    Run::open(&job.out, exp, &text, imported).map_err(|e| match e {
+    let opened = Run::open(&job.out, exp, &text, imported).map_err(|e| match e {
         coordinator::run::RunError::OtherExperiment { .. }
+        | coordinator::run::RunError::Locked(_)
         | coordinator::run::RunError::Diverged { .. } => Failure::Usage(e.into()),
         e => Failure::Job(e.into()),
-    })
+    })?;
+    if let Some(before) = opened.0.extended_from() {
+        eprintln!(
+            "extending {} from {before} to {} iterations",
+            job.out.display(),
+            opened.0.evolve().experiment().iterations
+        );
+    }
+    Ok(opened)
 }
 
 fn service_config(job: &JobArgs, prefix: &str) -> ServiceConfig {
@@ -145,6 +168,8 @@ fn summary(
                     "duplicates": c.duplicates,
                     "refused": c.refused,
                     "redispatched": c.redispatched,
+                    "failures": c.failures,
+                    "set_aside": c.set_aside,
                     "cpu_s": process_cpu_seconds(),
                 }),
             ),
@@ -154,11 +179,17 @@ fn summary(
     match ended {
         Ended::Finished(c) => {
             eprintln!(
-                "run complete: {} outcomes journaled, {} duplicates ignored, {} refused, {} re-dispatched; journal in {}",
+                "run complete: {} outcomes journaled, {} duplicates ignored, {} refused, {} re-dispatched, {} trial failures{}; journal in {}",
                 c.accepted,
                 c.duplicates,
                 c.refused,
                 c.redispatched,
+                c.failures,
+                if c.set_aside.is_empty() {
+                    String::new()
+                } else {
+                    format!(" (set aside: {})", c.set_aside.join(", "))
+                },
                 run_dir.display()
             );
             Ok(())
@@ -202,6 +233,11 @@ pub fn coordinator(job: &JobArgs, net: &NetArgs, json: bool) -> Result<(), Failu
 
 /// `naofarm worker`.
 pub fn worker(net: &NetArgs, slots: Option<u32>, min_trial_ms: u64) -> Result<(), Failure> {
+    if min_trial_ms > 3_600_000 {
+        return Err(Failure::Usage(anyhow!(
+            "--min-trial-ms {min_trial_ms}: must be at most 3600000"
+        )));
+    }
     let cfg = net.zenoh_config(&[]).map_err(Failure::Usage)?;
     let mut wcfg = worker::service::WorkerConfig {
         prefix: net.prefix.clone(),
@@ -245,8 +281,10 @@ pub fn run(
             .and_then(|n| u32::try_from(n.get()).ok())
             .unwrap_or(1)
     });
-    if n == 0 {
-        return Err(Failure::Usage(anyhow!("--workers must be at least 1")));
+    if n == 0 || n > 1024 {
+        return Err(Failure::Usage(anyhow!(
+            "--workers {n}: must be in 1..=1024"
+        )));
     }
     let endpoint = match listen {
         Some(e) if e.starts_with("tcp/127.") || e.starts_with("tcp/[::1]") => e.to_string(),

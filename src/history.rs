@@ -16,7 +16,14 @@ pub fn history(dir: &Path, json: bool, csv: bool) -> Result<(), Failure> {
     if json && csv {
         return Err(Failure::Usage(anyhow!("choose one of --json and --csv")));
     }
-    let (exp, decided) = read_run(dir).map_err(|e| Failure::Usage(e.into()))?;
+    let view = read_run(dir).map_err(|e| match e {
+        coordinator::run::RunError::Journal(coordinator::journal::JournalError::Io { .. }) => {
+            Failure::Usage(e.into())
+        }
+        e => Failure::Job(e.into()),
+    })?;
+    crate::journal::note_tail(dir, &view);
+    let (exp, decided) = (view.experiment, view.decided);
     let names: Vec<&str> = exp.parameter.iter().map(|p| p.name.as_str()).collect();
     // ν′ at the end of the history: the row flagged `best`.
     let best = decided

@@ -1,9 +1,13 @@
 //! The one naofarm CLI: parses arguments and wires the crates together.
 
+#[macro_use]
+mod out;
+
 mod benches;
 mod cli;
 mod farm;
 mod history;
+mod journal;
 mod net;
 mod robot;
 mod tune;

@@ -72,9 +72,9 @@ pub fn stand(a: &StandArgs) -> Result<(), Failure> {
                 .map(|(j, a)| (j.name.clone(), serde_json::json!(a)))
                 .collect::<serde_json::Map<String, serde_json::Value>>(),
         });
-        println!("{v}");
+        outln!("{v}");
     } else {
-        println!(
+        outln!(
             "type {} stood {:.2} s: {}",
             a.robot_type,
             p.time_s,
@@ -83,9 +83,9 @@ pub fn stand(a: &StandArgs) -> Result<(), Failure> {
                 None => "did not fall".into(),
             }
         );
-        println!("torso height min {lo:.4} m, max {hi:.4} m");
+        outln!("torso height min {lo:.4} m, max {hi:.4} m");
         let t = p.torso_position_m;
-        println!(
+        outln!(
             "final torso ({:.4}, {:.4}, {:.4}) m, tilt {:.2}°",
             t[0],
             t[1],
@@ -161,6 +161,9 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         protocol::params::check_value(name, *v).map_err(|e| Failure::Usage(anyhow!(e)))?;
     }
     NaoModel::with_params(a.robot_type, &params).map_err(|e| Failure::Usage(e.into()))?;
+    if a.threads.is_some_and(|t| t == 0 || t > 1024) {
+        return Err(Failure::Usage(anyhow!("--threads must be in 1..=1024")));
+    }
     let threads = a
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from));
@@ -217,14 +220,15 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             "diverged": diverged,
             "wall_s": wall,
         });
-        println!("{v}");
+        outln!("{v}");
     } else {
         let f = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.3}"));
-        println!(
+        outln!(
             "     s     mx     my     ex     ey   (m; {} trials of {} s)",
-            a.trials, a.duration
+            a.trials,
+            a.duration
         );
-        println!(
+        outln!(
             "{:6.2} {:>6} {:>6} {:>6} {:>6}",
             s.s,
             f(s.mx),
@@ -233,9 +237,9 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             f(s.ey)
         );
         if diverged > 0 {
-            println!("{diverged} of the falls were the physics diverging (counted as falls, no distance)");
+            outln!("{diverged} of the falls were the physics diverging (counted as falls, no distance)");
         }
-        println!(
+        outln!(
             "{:.1} trials/s on {threads} threads ({wall:.2} s wall)",
             a.trials as f64 / wall
         );
@@ -462,14 +466,18 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
                 "fell": r.fell,
             })).collect::<Vec<_>>(),
         });
-        println!("{v}");
+        outln!("{v}");
     } else {
-        println!(
+        outln!(
             "{:<44} {:>6} {:>10} {:>12} {:>6}",
-            "settings", "motion", "realtime×", "steps/s", "fell"
+            "settings",
+            "motion",
+            "realtime×",
+            "steps/s",
+            "fell"
         );
         for r in &rows {
-            println!(
+            outln!(
                 "{:<44} {:>6} {:>10.1} {:>12.0} {:>6}",
                 r.label,
                 r.motion,

@@ -75,14 +75,14 @@ impl View {
 
     fn line(&self, text: &str) {
         if self.bar.is_hidden() {
-            println!("{text}");
+            outln!("{text}");
         } else {
             self.bar.println(text);
         }
     }
 
     fn event(&self, value: &serde_json::Value) {
-        println!("{value}");
+        outln!("{value}");
     }
 
     /// Iterations decided before the view started (a status query's history).
@@ -177,10 +177,10 @@ impl View {
         }
         self.bar.finish_and_clear();
         match &s.best {
-            Some(b) => println!("Optim.1 (nu'): {}", best_line(b, "\n  ")),
-            None => println!("Optim.1: no parameter set was accepted"),
+            Some(b) => outln!("Optim.1 (nu'): {}", best_line(b, "\n  ")),
+            None => outln!("Optim.1: no parameter set was accepted"),
         }
-        println!("Optim.2 (CLOP's mean):\n  {}", params(&s.optim2));
+        outln!("Optim.2 (CLOP's mean):\n  {}", params(&s.optim2));
     }
 
     /// Clears the terminal view without a summary (interrupted, failed).

@@ -69,9 +69,9 @@ async fn query_until(
 
 /// `naofarm watch`.
 pub fn watch(a: &WatchArgs) -> Result<(), Failure> {
-    if !(a.timeout_s.is_finite() && a.timeout_s > 0.0) {
+    if !(a.timeout_s.is_finite() && a.timeout_s > 0.0 && a.timeout_s <= 86_400.0) {
         return Err(Failure::Usage(anyhow!(
-            "--timeout-s must be a positive number of seconds"
+            "--timeout-s must be in (0, 86400] seconds"
         )));
     }
     if let Some(run) = &a.run {
@@ -123,9 +123,9 @@ async fn list(
     }
     for s in &runs {
         if json {
-            println!("{}", s.to_json());
+            outln!("{}", s.to_json());
         } else {
-            println!(
+            outln!(
                 "{:<24} {:>5}/{:<5} decided  A {} E {} R {}  {} workers  {:.1} trials/s{}",
                 s.run,
                 s.decided,

@@ -1,34 +1,9 @@
 //! End-to-end tests: the `naofarm` binary as a real process.
 #![allow(clippy::unwrap_used)]
 
-use std::{path::PathBuf, process::Command};
+mod util;
 
-fn naofarm() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_naofarm"))
-}
-
-/// Runs a command that must succeed; on failure the message shows both streams.
-fn succeed(cmd: &mut Command) -> std::process::Output {
-    let out = cmd.output().unwrap();
-    assert!(
-        out.status.success(),
-        "{}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("naofarm-e2e-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
+use util::{naofarm, root, scratch, succeed};
 
 #[test]
 fn check_prints_the_five_parameters_with_the_papers_bounds() {
@@ -259,8 +234,7 @@ n_mcmc = 100
     }
 
     fn journal(dir: &Path) -> Vec<Record> {
-        let (_, r) = Journal::open(dir).unwrap();
-        r.records
+        Journal::read(dir).unwrap().records()
     }
 
     fn decided(records: &[Record]) -> Vec<DecidedIteration> {
@@ -418,6 +392,41 @@ n_mcmc = 100
     }
 
     #[test]
+    fn a_second_coordinator_on_a_run_directory_exits_2_while_the_first_finishes() {
+        let dir = scratch("two-coordinators");
+        let exp = experiment(&dir, 8);
+        let port = free_port();
+        let out = dir.join("run");
+        let mut c = Coordinator::start(&exp, &out, port, 30.0);
+        // No worker yet: the first coordinator holds the run and waits for one.
+        let deadline = Instant::now() + TIMEOUT;
+        let holder = format!("pid {}", c.child.id());
+        while !std::fs::read_to_string(out.join("lock")).is_ok_and(|t| t.contains(&holder)) {
+            assert!(
+                Instant::now() < deadline,
+                "the first coordinator never took the lock"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let second = naofarm()
+            .args(["coordinator", "--json"])
+            .arg(&exp)
+            .arg("--out")
+            .arg(&out)
+            .args(["--listen", &format!("tcp/127.0.0.1:{}", free_port())])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&second.stderr);
+        assert_eq!(second.status.code(), Some(2), "{err}");
+        assert!(err.contains(&holder) && err.contains("in use"), "{err}");
+        let mut ws = vec![worker(port, 2, 5)];
+        let status = c.wait_exit();
+        kill_all(&mut ws);
+        assert!(status.success(), "{:?}", c.seen);
+        assert_every_trial_once(&journal(&out), 8);
+    }
+
+    #[test]
     fn a_worker_that_joins_mid_run_gets_work() {
         let dir = scratch("join");
         let exp = experiment(&dir, 16);
@@ -426,12 +435,8 @@ n_mcmc = 100
         let mut c = Coordinator::start(&exp, &out, port, 30.0);
         let mut ws = vec![worker(port, 1, 25)];
         c.wait_decided(3);
-        // Read, never open: opening would repair a record the coordinator is writing.
-        let path = Journal::path_in(&out);
-        let before = Journal::parse(&path, &std::fs::read(&path).unwrap())
-            .unwrap()
-            .records
-            .len();
+        // Read only: the coordinator holds the run and may be writing its tail.
+        let before = Journal::read(&out).unwrap().records.len();
         ws.push(worker(port, 1, 25));
         let status = c.wait_exit();
         kill_all(&mut ws);
@@ -959,7 +964,10 @@ fn a_torn_journal_resumes_and_a_corrupt_one_is_refused_with_its_offset() {
     let out = run(&corrupt);
     assert_eq!(out.status.code(), Some(1), "{out:?}");
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("corrupt record at byte offset"), "{err}");
+    assert!(
+        err.contains("damaged frame at byte offset") && err.contains("journal salvage"),
+        "{err}"
+    );
     assert_eq!(std::fs::read(corrupt.join("journal.nfj")).unwrap(), damaged);
 }
 

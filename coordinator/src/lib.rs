@@ -16,6 +16,7 @@ pub mod clop;
 pub mod cmaes;
 pub mod evolve;
 pub mod journal;
+pub mod lock;
 pub mod problems;
 pub mod run;
 pub mod service;

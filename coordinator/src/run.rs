@@ -6,7 +6,10 @@
 //! transport: trials to dispatch, decisions to publish. Everything an effect
 //! refers to is durable before the effect is returned.
 
-use std::{collections::BTreeSet, path::Path};
+use std::{
+    collections::{BTreeMap, BTreeSet},
+    path::Path,
+};
 
 use protocol::{experiment::text_hash, Experiment, TrialRequest};
 
@@ -15,7 +18,8 @@ use crate::{
         Action, Counted, DecidedIteration, Evolve, Imported, OpenedIteration, OutcomeError,
         TrialResult,
     },
-    journal::{Journal, JournalError, Record},
+    journal::{Journal, JournalError, Record, Tail},
+    lock::{LockError, RunLock},
 };
 
 /// What the transport must do.
@@ -58,6 +62,17 @@ pub enum RunError {
     /// An outcome was refused (unknown iteration, wrong seed, NaN…).
     #[error(transparent)]
     Refused(#[from] OutcomeError),
+    /// Another coordinator holds the run directory.
+    #[error(transparent)]
+    Locked(#[from] LockError),
+    /// `--from` names a run whose parameters are not this experiment's.
+    #[error("--from {dir}: {why}")]
+    FromMismatch {
+        /// The earlier run's directory.
+        dir: String,
+        /// What differs.
+        why: String,
+    },
     /// The journal's header holds an experiment this build cannot read.
     #[error("{dir}: the journal's experiment does not parse: {why}")]
     BadHeader {
@@ -68,7 +83,7 @@ pub enum RunError {
     },
 }
 
-/// A run: the loop plus its journal.
+/// A run: the loop plus its journal, under the run directory's lock.
 #[derive(Debug)]
 pub struct Run {
     ev: Evolve,
@@ -76,14 +91,135 @@ pub struct Run {
     journaled_open: BTreeSet<u64>,
     journaled_decided: BTreeSet<u64>,
     resumed: bool,
+    extended_from: Option<u64>,
+    failures: BTreeMap<(u64, u32), Vec<(String, String)>>,
+    _lock: RunLock,
 }
 
-fn effective_json(exp: &Experiment) -> String {
-    serde_json::to_string(exp).unwrap_or_default()
+/// A trial stops the run when it has failed on this many distinct workers.
+pub const DISTINCT_FAILURES: usize = 3;
+/// …or this many times in all (a small fleet retrying it on the same workers).
+pub const TOTAL_FAILURES: usize = 6;
+
+/// What a trial's failure means for the run.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FailureVerdict {
+    /// Journaled: give the trial to another worker.
+    Retry,
+    /// Not about a pending trial (late, or already decided): nothing journaled.
+    Ignored,
+    /// The trial failed too often: the run must stop with this report.
+    GiveUp(GaveUp),
+}
+
+/// A trial that cannot be run: the run stops with this.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GaveUp {
+    /// Iteration.
+    pub iteration: u64,
+    /// Trial index.
+    pub trial: u32,
+    /// The trial's full parameter set.
+    pub params: Vec<(String, f64)>,
+    /// Each failure: worker and reason.
+    pub reasons: Vec<(String, String)>,
+}
+
+impl std::fmt::Display for GaveUp {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let workers: BTreeSet<&str> = self.reasons.iter().map(|(w, _)| w.as_str()).collect();
+        write!(
+            f,
+            "trial {} of iteration {} failed {} times on {} distinct workers; the run stops. Parameters: {}. Reasons: {}",
+            self.trial,
+            self.iteration,
+            self.reasons.len(),
+            workers.len(),
+            self.params
+                .iter()
+                .map(|(n, v)| format!("{n}={v}"))
+                .collect::<Vec<_>>()
+                .join(", "),
+            self.reasons
+                .iter()
+                .map(|(w, r)| format!("worker {w}: {r}"))
+                .collect::<Vec<_>>()
+                .join("; ")
+        )
+    }
+}
+
+fn effective_json(exp: &Experiment) -> Result<String, RunError> {
+    serde_json::to_string(exp).map_err(|e| RunError::BadHeader {
+        dir: String::new(),
+        why: format!("the experiment does not encode as JSON: {e}"),
+    })
+}
+
+/// The fields (dotted paths) in which two experiments differ.
+#[must_use]
+pub fn differing_fields(a: &Experiment, b: &Experiment) -> Vec<String> {
+    fn walk(prefix: &str, a: &serde_json::Value, b: &serde_json::Value, out: &mut Vec<String>) {
+        match (a, b) {
+            (serde_json::Value::Object(x), serde_json::Value::Object(y)) => {
+                let keys: BTreeSet<&String> = x.keys().chain(y.keys()).collect();
+                for k in keys {
+                    let path = if prefix.is_empty() {
+                        k.clone()
+                    } else {
+                        format!("{prefix}.{k}")
+                    };
+                    match (x.get(k), y.get(k)) {
+                        (Some(p), Some(q)) => walk(&path, p, q, out),
+                        _ => out.push(path),
+                    }
+                }
+            }
+            _ if a != b => out.push(prefix.to_string()),
+            _ => {}
+        }
+    }
+    let (Ok(a), Ok(b)) = (serde_json::to_value(a), serde_json::to_value(b)) else {
+        return vec!["(unencodable experiment)".into()];
+    };
+    let mut out = Vec::new();
+    walk("", &a, &b, &mut out);
+    out
+}
+
+/// A journal's header experiment with its extensions applied, and the
+/// imported history: what the run is.
+fn journaled_experiment(
+    dir: &Path,
+    records: &[Record],
+) -> Result<(Experiment, Imported), RunError> {
+    let Some(Record::Header {
+        experiment_json,
+        imported,
+        ..
+    }) = records.first()
+    else {
+        return Err(JournalError::NoHeader {
+            path: Journal::path_in(dir),
+        }
+        .into());
+    };
+    let mut exp =
+        serde_json::from_str::<Experiment>(experiment_json).map_err(|e| RunError::BadHeader {
+            dir: dir.display().to_string(),
+            why: e.to_string(),
+        })?;
+    for r in records {
+        if let Record::Extended { iterations, .. } = r {
+            exp.iterations = exp.iterations.max(*iterations);
+        }
+    }
+    Ok((exp, imported.clone()))
 }
 
 impl Run {
-    /// Creates a run in `dir`, or resumes the one there.
+    /// Creates a run in `dir`, or resumes (or extends) the one there. Takes the
+    /// directory's lock first; every check happens before any write.
     ///
     /// `imported` (a history from `--from`) is used only when creating.
     pub fn open(
@@ -92,14 +228,15 @@ impl Run {
         exp_text: &str,
         imported: Option<Imported>,
     ) -> Result<(Self, Vec<Effect>), RunError> {
+        let lock = RunLock::acquire(dir)?;
         if Journal::path_in(dir).exists() {
-            return Self::resume(dir, exp);
+            return Self::resume(dir, exp, lock);
         }
         let imported = imported.unwrap_or_default();
         let header = Record::Header {
             experiment_text: exp_text.to_string(),
             experiment_hash: text_hash(exp_text),
-            experiment_json: effective_json(&exp),
+            experiment_json: effective_json(&exp)?,
             version: env!("CARGO_PKG_VERSION").to_string(),
             imported: imported.clone(),
         };
@@ -111,52 +248,59 @@ impl Run {
             journaled_open: BTreeSet::new(),
             journaled_decided: BTreeSet::new(),
             resumed: false,
+            extended_from: None,
+            failures: BTreeMap::new(),
+            _lock: lock,
         };
         let effects = run.act(actions)?;
         Ok((run, effects))
     }
 
-    fn resume(dir: &Path, exp: Experiment) -> Result<(Self, Vec<Effect>), RunError> {
+    fn resume(dir: &Path, exp: Experiment, lock: RunLock) -> Result<(Self, Vec<Effect>), RunError> {
         let dirs = dir.display().to_string();
-        let (journal, replay) = Journal::open(dir)?;
-        if let Some((offset, len)) = replay.torn {
-            tracing::warn!(journal = %journal.path().display(), offset, len, "dropped a torn last record");
+        let scan = Journal::read(dir)?;
+        if let Some(e) = scan.damage(&Journal::path_in(dir)) {
+            return Err(e.into());
         }
-        let mut records = replay.records.into_iter();
-        let Some(Record::Header {
-            experiment_json,
-            imported,
-            ..
-        }) = records.next()
-        else {
-            return Err(JournalError::NoHeader {
-                path: journal.path().to_path_buf(),
-            }
-            .into());
-        };
-        // Compared as experiments, not as text: a journal written before a
-        // field existed reads it at its default.
-        let theirs = serde_json::from_str::<Experiment>(&experiment_json);
-        if !matches!(&theirs, Ok(t) if *t == exp) {
-            let why = match theirs {
-                Ok(theirs) if theirs.name != exp.name => {
-                    format!("run `{}`, not `{}`", theirs.name, exp.name)
-                }
-                Ok(theirs) if theirs.seed != exp.seed => {
-                    format!("seed {}, not {}", theirs.seed, exp.seed)
-                }
-                Ok(theirs) if theirs.physics != exp.physics => {
-                    format!("physics {:?}, not {:?}", theirs.physics, exp.physics)
-                }
-                Ok(_) => "its settings differ".to_string(),
-                Err(e) => format!("unreadable header: {e}"),
-            };
-            return Err(RunError::OtherExperiment { dir: dirs, why });
+        let records = scan.records();
+        let (theirs, imported) = journaled_experiment(dir, &records)?;
+        let mut differ = differing_fields(&theirs, &exp);
+        let extend = differ == ["iterations"] && exp.iterations > theirs.iterations;
+        if extend {
+            differ.clear();
+        }
+        if !differ.is_empty() {
+            let detail = differ
+                .iter()
+                .map(|f| match f.as_str() {
+                    "iterations" => format!(
+                        "iterations (the run plans {}, this asks {}; a run can be extended, not shortened)",
+                        theirs.iterations, exp.iterations
+                    ),
+                    "name" => format!("name (`{}`, not `{}`)", theirs.name, exp.name),
+                    "seed" => format!("seed ({}, not {})", theirs.seed, exp.seed),
+                    f => f.to_string(),
+                })
+                .collect::<Vec<_>>()
+                .join(", ");
+            return Err(RunError::OtherExperiment {
+                dir: dirs,
+                why: format!("differs in {detail}"),
+            });
+        }
+        // Every check is done: now the journal may be repaired and appended to.
+        let mut journal = Journal::open_for_append(dir, &scan)?;
+        if extend {
+            journal.append(&Record::Extended {
+                iterations: exp.iterations,
+                version: env!("CARGO_PKG_VERSION").to_string(),
+            })?;
         }
         let (mut ev, mut actions) = Evolve::start(exp, &imported);
         let mut opened_records = Vec::new();
         let mut decided_records = Vec::new();
-        for rec in records {
+        let mut failures: BTreeMap<(u64, u32), Vec<(String, String)>> = BTreeMap::new();
+        for rec in records.into_iter().skip(1) {
             match rec {
                 Record::Header { .. } => {
                     return Err(RunError::Diverged {
@@ -165,6 +309,16 @@ impl Run {
                         why: "a second header".into(),
                     })
                 }
+                Record::Extended { .. } => {}
+                Record::Failed {
+                    iteration,
+                    trial,
+                    worker,
+                    reason,
+                } => failures
+                    .entry((iteration, trial))
+                    .or_default()
+                    .push((worker, reason)),
                 Record::Opened(o) => opened_records.push(o),
                 Record::Decided(d) => decided_records.push(d),
                 Record::Outcome {
@@ -190,6 +344,9 @@ impl Run {
             journaled_open: BTreeSet::new(),
             journaled_decided: BTreeSet::new(),
             resumed: true,
+            extended_from: extend.then_some(theirs.iterations),
+            failures,
+            _lock: lock,
         };
         for o in opened_records {
             let same = actions
@@ -282,6 +439,74 @@ impl Run {
         }
     }
 
+    /// Takes a worker's report that it could not run a pending trial: journals
+    /// it and says whether to retry elsewhere or stop the run.
+    pub fn on_failure(
+        &mut self,
+        iteration: u64,
+        trial: u32,
+        worker: &str,
+        reason: &str,
+    ) -> Result<FailureVerdict, RunError> {
+        if !self.is_pending(iteration, trial) {
+            return Ok(FailureVerdict::Ignored);
+        }
+        self.journal.append(&Record::Failed {
+            iteration,
+            trial,
+            worker: worker.to_string(),
+            reason: reason.to_string(),
+        })?;
+        self.failures
+            .entry((iteration, trial))
+            .or_default()
+            .push((worker.to_string(), reason.to_string()));
+        Ok(self.verdict(iteration, trial))
+    }
+
+    fn verdict(&self, iteration: u64, trial: u32) -> FailureVerdict {
+        let Some(reasons) = self.failures.get(&(iteration, trial)) else {
+            return FailureVerdict::Retry;
+        };
+        let distinct: BTreeSet<&str> = reasons.iter().map(|(w, _)| w.as_str()).collect();
+        if distinct.len() < DISTINCT_FAILURES && reasons.len() < TOTAL_FAILURES {
+            return FailureVerdict::Retry;
+        }
+        let params = self
+            .ev
+            .missing()
+            .into_iter()
+            .find(|(o, _)| o.iteration == iteration)
+            .map(|(o, _)| self.ev.experiment().full_params(&o.params))
+            .unwrap_or_default();
+        FailureVerdict::GiveUp(GaveUp {
+            iteration,
+            trial,
+            params,
+            reasons: reasons.clone(),
+        })
+    }
+
+    /// A pending trial that has already failed too often (a resumed run keeps the counts).
+    #[must_use]
+    pub fn exhausted(&self) -> Option<GaveUp> {
+        self.failures.keys().find_map(
+            |&(i, k)| match (self.is_pending(i, k), self.verdict(i, k)) {
+                (true, FailureVerdict::GiveUp(g)) => Some(g),
+                _ => None,
+            },
+        )
+    }
+
+    /// The distinct workers that failed (iteration, trial).
+    #[must_use]
+    pub fn failed_workers(&self, iteration: u64, trial: u32) -> BTreeSet<String> {
+        self.failures
+            .get(&(iteration, trial))
+            .map(|v| v.iter().map(|(w, _)| w.clone()).collect())
+            .unwrap_or_default()
+    }
+
     /// Whether an outcome for (iteration, trial) would still be taken.
     #[must_use]
     pub fn is_pending(&self, iteration: u64, trial: u32) -> bool {
@@ -320,65 +545,232 @@ impl Run {
     pub fn resumed(&self) -> bool {
         self.resumed
     }
+
+    /// The planned total before this open extended the run, if it did.
+    #[must_use]
+    pub fn extended_from(&self) -> Option<u64> {
+        self.extended_from
+    }
 }
 
-/// Reads a run's journal without opening it for writing (a torn tail is
-/// skipped, not repaired): its path and records.
-fn read_journal(dir: &Path) -> Result<(std::path::PathBuf, crate::journal::Replay), RunError> {
+/// A run as its journal tells it, read without writing anything.
+#[derive(Debug, Clone)]
+pub struct RunView {
+    /// The effective experiment (extensions applied).
+    pub experiment: Experiment,
+    /// The decided history.
+    pub decided: Vec<DecidedIteration>,
+    /// How the journal ends (never [`Tail::Damaged`]: that is an error).
+    pub tail: Tail,
+    /// Whether a coordinator holds the run now (a torn-looking tail is then in progress).
+    pub live: bool,
+    /// The journal's format.
+    pub format: u32,
+    /// The naofarm version that created the run.
+    pub version: String,
+    /// Records read.
+    pub records: usize,
+    /// The planned totals the run was extended to, in order.
+    pub extensions: Vec<u64>,
+}
+
+/// Reads the run in `dir`: damage is an error naming its offset; a torn tail is
+/// reported in [`RunView::tail`]. Reading never writes and takes no lock.
+pub fn read_run(dir: &Path) -> Result<RunView, RunError> {
+    let scan = Journal::read(dir)?;
+    if let Some(e) = scan.damage(&Journal::path_in(dir)) {
+        return Err(e.into());
+    }
+    let records = scan.records();
+    let (experiment, _) = journaled_experiment(dir, &records)?;
+    let version = match records.first() {
+        Some(Record::Header { version, .. }) => version.clone(),
+        _ => String::new(),
+    };
+    let mut decided = Vec::new();
+    let mut extensions = Vec::new();
+    for rec in &records {
+        match rec {
+            Record::Decided(d) => decided.push(d.clone()),
+            Record::Extended { iterations, .. } => extensions.push(*iterations),
+            _ => {}
+        }
+    }
+    Ok(RunView {
+        experiment,
+        decided,
+        tail: scan.tail,
+        live: RunLock::is_held(dir),
+        format: scan.format,
+        version,
+        records: records.len(),
+        extensions,
+    })
+}
+
+/// An earlier run's H and ν′ for `--from RUN_DIR` (its own imports included),
+/// matched to `exp`'s parameters by name.
+#[derive(Debug, Clone)]
+pub struct FromRun {
+    /// The points that lie inside `exp`'s bounds, in `exp`'s parameter order.
+    pub imported: Imported,
+    /// Points in the earlier run.
+    pub total: usize,
+    /// Whether the earlier ν′ was kept (inside the new bounds).
+    pub best_kept: bool,
+}
+
+/// Reads an earlier run for `--from`: a different parameter set is refused
+/// (the names on each side); points outside `exp`'s bounds are left out.
+pub fn load_history(dir: &Path, exp: &Experiment) -> Result<FromRun, RunError> {
+    let view = read_run(dir)?;
+    let scan = Journal::read(dir)?;
+    let mut all = Imported::default();
+    for rec in scan.records() {
+        match rec {
+            Record::Header { imported, .. } => all = imported,
+            Record::Decided(d) => {
+                all.history.push((d.params.clone(), d.decision));
+                if d.best.is_some() {
+                    all.best = d.best;
+                }
+            }
+            _ => {}
+        }
+    }
+    let theirs: Vec<&str> = view
+        .experiment
+        .parameter
+        .iter()
+        .map(|p| p.name.as_str())
+        .collect();
+    let ours: Vec<&str> = exp.parameter.iter().map(|p| p.name.as_str()).collect();
+    let mismatch = |why: String| RunError::FromMismatch {
+        dir: dir.display().to_string(),
+        why,
+    };
+    let (mut a, mut b) = (theirs.clone(), ours.clone());
+    a.sort_unstable();
+    b.sort_unstable();
+    if a != b {
+        return Err(mismatch(format!(
+            "its parameters ({}) are not this experiment's ({})",
+            theirs.join(", "),
+            ours.join(", ")
+        )));
+    }
+    // Position in the earlier run of each of ours.
+    let index: Vec<usize> = ours
+        .iter()
+        .filter_map(|n| theirs.iter().position(|t| t == n))
+        .collect();
+    let remap = |p: &[f64]| -> Option<Vec<f64>> {
+        let v: Vec<f64> = index
+            .iter()
+            .map(|&i| p.get(i).copied())
+            .collect::<Option<_>>()?;
+        let inside = v
+            .iter()
+            .zip(&exp.parameter)
+            .all(|(x, s)| x.is_finite() && *x >= s.lower && *x <= s.upper);
+        inside.then_some(v)
+    };
+    let total = all.history.len();
+    let history = all
+        .history
+        .iter()
+        .filter_map(|(p, d)| remap(p).map(|v| (v, *d)))
+        .collect();
+    let best = all
+        .best
+        .as_ref()
+        .and_then(|(i, p, s)| remap(p).map(|v| (*i, v, s.clone())));
+    Ok(FromRun {
+        best_kept: best.is_some() || all.best.is_none(),
+        imported: Imported { history, best },
+        total,
+    })
+}
+
+/// What `journal salvage` recovered.
+#[derive(Debug, Clone)]
+pub struct Salvaged {
+    /// Valid records found in the damaged journal.
+    pub records: usize,
+    /// Byte spans skipped (offset, length).
+    pub skipped: Vec<(u64, u64)>,
+    /// Outcomes carried into the new run.
+    pub outcomes: usize,
+    /// Outcomes left out (their iteration could not be reopened without the lost ones).
+    pub dropped: usize,
+    /// Iterations decided in the new run.
+    pub decided: u64,
+}
+
+/// Writes every valid record of `dir`'s journal into a new run directory `out`
+/// (which must hold no journal): the header, then each recovered outcome
+/// through the run itself, so `out` resumes. `dir` is only read.
+pub fn salvage(dir: &Path, out: &Path) -> Result<Salvaged, RunError> {
     let path = Journal::path_in(dir);
     let bytes = std::fs::read(&path).map_err(|cause| JournalError::Io {
         path: path.clone(),
         cause,
     })?;
-    let replay = Journal::parse(&path, &bytes)?;
-    Ok((path, replay))
-}
-
-/// Reads an earlier run's H and ν′ for `--from RUN_DIR` (its own imports included).
-pub fn load_history(dir: &Path) -> Result<Imported, RunError> {
-    let (_, replay) = read_journal(dir)?;
-    let mut out = Imported::default();
-    for rec in replay.records {
-        match rec {
-            Record::Header { imported, .. } => out = imported,
-            Record::Decided(d) => {
-                out.history.push((d.params.clone(), d.decision));
-                if d.best.is_some() {
-                    out.best = d.best;
+    let found = crate::journal::scan_all(&path, &bytes)?;
+    let records: Vec<Record> = found.records.iter().map(|(_, r)| r.clone()).collect();
+    let (exp, imported) = journaled_experiment(dir, &records)?;
+    let text = match records.first() {
+        Some(Record::Header {
+            experiment_text, ..
+        }) => experiment_text.clone(),
+        _ => String::new(),
+    };
+    if Journal::path_in(out).exists() {
+        return Err(RunError::OtherExperiment {
+            dir: out.display().to_string(),
+            why: "it already holds a journal; salvage writes into a new directory".into(),
+        });
+    }
+    let (mut run, _) = Run::open(out, exp, &text, Some(imported))?;
+    let mut pending: Vec<(u64, u32, u64, TrialResult)> = records
+        .into_iter()
+        .filter_map(|r| match r {
+            Record::Outcome {
+                iteration,
+                trial,
+                seed,
+                result,
+            } => Some((iteration, trial, seed, result)),
+            _ => None,
+        })
+        .collect();
+    let mut outcomes = 0;
+    loop {
+        let before = pending.len();
+        let mut later = Vec::new();
+        for (i, k, seed, r) in pending {
+            match run.on_outcome(i, k, seed, r.clone()) {
+                Ok((Counted::New, _)) => outcomes += 1,
+                Ok((Counted::Duplicate, _)) => {}
+                Err(RunError::Refused(OutcomeError::UnknownIteration(_))) => {
+                    later.push((i, k, seed, r));
                 }
+                Err(RunError::Refused(_)) => {}
+                Err(e) => return Err(e),
             }
-            Record::Opened(_) | Record::Outcome { .. } => {}
+        }
+        pending = later;
+        if pending.is_empty() || pending.len() == before {
+            break;
         }
     }
-    Ok(out)
-}
-
-/// A finished or running run as its journal tells it: the effective experiment
-/// and the decided history (for `naofarm history`). Reading never writes.
-pub fn read_run(dir: &Path) -> Result<(Experiment, Vec<DecidedIteration>), RunError> {
-    let (path, replay) = read_journal(dir)?;
-    let mut exp = None;
-    let mut decided = Vec::new();
-    for rec in replay.records {
-        match rec {
-            Record::Header {
-                experiment_json, ..
-            } => {
-                exp = Some(
-                    serde_json::from_str::<Experiment>(&experiment_json).map_err(|e| {
-                        RunError::BadHeader {
-                            dir: dir.display().to_string(),
-                            why: e.to_string(),
-                        }
-                    })?,
-                );
-            }
-            Record::Decided(d) => decided.push(d),
-            Record::Opened(_) | Record::Outcome { .. } => {}
-        }
-    }
-    let exp = exp.ok_or(JournalError::NoHeader { path })?;
-    Ok((exp, decided))
+    Ok(Salvaged {
+        records: found.records.len(),
+        skipped: found.skipped,
+        outcomes,
+        dropped: pending.len(),
+        decided: run.ev.decided(),
+    })
 }
 
 /// Runs every effect to completion in this thread with `trial` (tests, local tools).
@@ -544,9 +936,9 @@ n_mcmc = 200
             Err(RunError::Refused(OutcomeError::WrongSeed { .. }))
         ));
         drop(run);
-        let (_, replay) = Journal::open(&dir).unwrap();
-        let outcomes = replay
-            .records
+        let outcomes = Journal::read(&dir)
+            .unwrap()
+            .records()
             .iter()
             .filter(|r| matches!(r, Record::Outcome { .. }))
             .count();
@@ -580,9 +972,9 @@ n_mcmc = 200
             let (mut run, effects) = Run::open(&dir, exp(), EXP, None).unwrap();
             assert!(run.resumed());
             drive_local(&mut run, effects, &synthetic, &mut |_| {}).unwrap();
-            let (_, replay) = Journal::open(&dir).unwrap();
-            let decided: Vec<DecidedIteration> = replay
-                .records
+            let decided: Vec<DecidedIteration> = Journal::read(&dir)
+                .unwrap()
+                .records()
                 .into_iter()
                 .filter_map(|r| {
                     if let Record::Decided(d) = r {
@@ -693,10 +1085,10 @@ n_mcmc = 200
         let dir = tmp("physics");
         let (run, _) = Run::open(&dir, exp(), EXP, None).unwrap();
         drop(run);
-        let (_, replay) = crate::journal::Journal::open(&dir).unwrap();
+        let records = Journal::read(&dir).unwrap().records();
         let Some(crate::journal::Record::Header {
             experiment_json, ..
-        }) = replay.records.first()
+        }) = records.first()
         else {
             panic!("no header");
         };
@@ -724,11 +1116,13 @@ n_mcmc = 200
         let dir = tmp("from-a");
         let (mut run, effects) = Run::open(&dir, exp(), EXP, None).unwrap();
         drive_local(&mut run, effects, &synthetic, &mut |_| {}).unwrap();
-        let imported = load_history(&dir).unwrap();
+        let text = EXP.replace("start = \"expert\"", "start = \"scratch\"");
+        let imported = load_history(&dir, &Experiment::from_toml(&text).unwrap())
+            .unwrap()
+            .imported;
         assert_eq!(imported.history.len(), 40);
         assert!(imported.best.is_some());
         let dir2 = tmp("from-b");
-        let text = EXP.replace("start = \"expert\"", "start = \"scratch\"");
         let (mut run2, effects) = Run::open(
             &dir2,
             Experiment::from_toml(&text).unwrap(),
@@ -743,7 +1137,8 @@ n_mcmc = 200
             "ν′ carries over"
         );
         drive_local(&mut run2, effects, &synthetic, &mut |_| {}).unwrap();
-        let again = load_history(&dir2).unwrap();
-        assert_eq!(again.history.len(), 80, "H accumulates");
+        drop(run2);
+        let again = load_history(&dir2, &exp()).unwrap();
+        assert_eq!(again.imported.history.len(), 80, "H accumulates");
     }
 }

@@ -15,13 +15,13 @@ use std::{
 
 use protocol::{
     keys,
-    wire::{IterationResult, RunStatus, TrialOutcome, WireMessage, WorkerPresence},
+    wire::{IterationResult, RunStatus, TrialFailure, TrialOutcome, WireMessage, WorkerPresence},
 };
 use zenoh::{bytes::Encoding, sample::SampleKind, Session};
 
 use crate::{
     evolve::{DecidedIteration, OpenedIteration, TrialResult},
-    run::{Effect, Run, RunError},
+    run::{Effect, FailureVerdict, Run, RunError},
 };
 
 /// Settings of the coordinator service.
@@ -56,7 +56,14 @@ pub struct Counters {
     pub refused: u64,
     /// Trials re-dispatched (lost worker or lease).
     pub redispatched: u64,
+    /// Trial failures journaled (a worker's report, or its loss while holding the trial).
+    pub failures: u64,
+    /// Workers set aside for failing trials that others ran.
+    pub set_aside: Vec<String>,
 }
+
+/// A worker that failed this many trials which others then ran is set aside.
+pub const SET_ASIDE_AFTER: u32 = 3;
 
 /// How the service ended.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -85,6 +92,9 @@ pub enum ServiceError {
     /// Zenoh failed.
     #[error("zenoh: {0}")]
     Zenoh(String),
+    /// A trial could not be run on any worker.
+    #[error("{0}")]
+    GaveUp(crate::run::GaveUp),
 }
 
 fn zerr(e: impl std::fmt::Display) -> ServiceError {
@@ -96,6 +106,16 @@ struct WorkerInfo {
     slots: u32,
     assigned: BTreeSet<(u64, u32)>,
     last_seen: Instant,
+}
+
+impl WorkerInfo {
+    fn new(slots: u32) -> Self {
+        Self {
+            slots,
+            assigned: BTreeSet::new(),
+            last_seen: Instant::now(),
+        }
+    }
 }
 
 #[derive(Debug)]
@@ -117,6 +137,8 @@ struct State {
     history: Vec<IterationResult>,
     started: Instant,
     trials_done: u64,
+    /// Per worker: trials it failed that another worker then ran.
+    bad: HashMap<String, u32>,
 }
 
 impl State {
@@ -163,15 +185,50 @@ impl State {
         }
     }
 
-    fn requeue_worker(&mut self, id: &str) {
+    /// A worker is gone (token dropped, or silent): its trials count as failed
+    /// by it and go back to the queue.
+    fn requeue_worker(&mut self, id: &str) -> Result<(), ServiceError> {
         if let Some(w) = self.workers.remove(id) {
+            tracing::info!(worker = id, "worker gone; its trials go back to the queue");
             for t in w.assigned {
-                if self.inflight.remove(&t).is_some() && self.run.is_pending(t.0, t.1) {
-                    self.queue.insert(t);
-                    self.counters.redispatched += 1;
+                if self.inflight.remove(&t).is_some() {
+                    self.failed(t, id, "the worker went away while holding the trial")?;
                 }
             }
-            tracing::info!(worker = id, "worker gone; its trials go back to the queue");
+        }
+        Ok(())
+    }
+
+    /// Journals a failure of trial `t` on worker `id` and re-queues the trial,
+    /// or stops the run when it has failed too often.
+    fn failed(&mut self, t: (u64, u32), id: &str, reason: &str) -> Result<(), ServiceError> {
+        match self.run.on_failure(t.0, t.1, id, reason)? {
+            FailureVerdict::Ignored => {}
+            FailureVerdict::Retry => {
+                self.counters.failures += 1;
+                self.counters.redispatched += 1;
+                self.queue.insert(t);
+            }
+            FailureVerdict::GiveUp(g) => {
+                self.counters.failures += 1;
+                return Err(ServiceError::GaveUp(g));
+            }
+        }
+        Ok(())
+    }
+
+    /// A trial was run: every other worker that failed it gets a mark.
+    fn ran_elsewhere(&mut self, t: (u64, u32), by: &str) {
+        for w in self.run.failed_workers(t.0, t.1) {
+            if w == by {
+                continue;
+            }
+            let n = self.bad.entry(w.clone()).or_default();
+            *n += 1;
+            if *n == SET_ASIDE_AFTER && !self.counters.set_aside.contains(&w) {
+                tracing::warn!(worker = %w, "set aside: it failed {SET_ASIDE_AFTER} trials that other workers ran");
+                self.counters.set_aside.push(w);
+            }
         }
     }
 }
@@ -189,6 +246,10 @@ pub async fn serve(
     let name = run.evolve().experiment().name.clone();
     let outcomes = session
         .declare_subscriber(keys::outcomes(&prefix))
+        .await
+        .map_err(zerr)?;
+    let failures = session
+        .declare_subscriber(keys::failures(&prefix))
         .await
         .map_err(zerr)?;
     let presence = session
@@ -227,7 +288,11 @@ pub async fn serve(
         history: Vec::new(),
         started: Instant::now(),
         trials_done: 0,
+        bad: HashMap::new(),
     };
+    if let Some(g) = st.run.exhausted() {
+        return Err(ServiceError::GaveUp(g));
+    }
     // A resumed run answers history queries with what it decided before.
     st.history = st
         .run
@@ -268,15 +333,37 @@ pub async fn serve(
                     Ok(o) => on_outcome(&session, &mut st, o, events.as_ref()).await?,
                 }
             }
+            s = failures.recv_async() => {
+                let s = s.map_err(zerr)?;
+                match TrialFailure::decode(&s.payload().to_bytes()) {
+                    Ok(f) if f.run == name => {
+                        let t = (f.iteration, f.trial);
+                        if st.inflight.get(&t).is_some_and(|x| x.worker == f.worker) {
+                            tracing::warn!(worker = %f.worker, iteration = f.iteration, trial = f.trial, reason = %f.reason, "a worker could not run a trial");
+                            st.inflight.remove(&t);
+                            if let Some(w) = st.workers.get_mut(&f.worker) {
+                                w.assigned.remove(&t);
+                                w.last_seen = Instant::now();
+                            }
+                            st.failed(t, &f.worker, &f.reason)?;
+                            dispatch(&session, &mut st).await;
+                        } else {
+                            st.counters.refused += 1;
+                            tracing::warn!(worker = %f.worker, "refused a failure report for a trial that worker does not hold");
+                        }
+                    }
+                    Ok(_) => st.counters.refused += 1,
+                    Err(e) => {
+                        st.counters.refused += 1;
+                        tracing::warn!(error = %e, "refused a message on the failures topic");
+                    }
+                }
+            }
             s = presence.recv_async() => {
                 let s = s.map_err(zerr)?;
                 match WorkerPresence::decode(&s.payload().to_bytes()) {
                     Ok(p) => {
-                        let w = st.workers.entry(p.worker.clone()).or_insert_with(|| WorkerInfo {
-                            slots: p.slots,
-                            assigned: BTreeSet::new(),
-                            last_seen: Instant::now(),
-                        });
+                        let w = st.workers.entry(p.worker.clone()).or_insert_with(|| WorkerInfo::new(p.slots));
                         w.slots = p.slots;
                         w.last_seen = Instant::now();
                     }
@@ -290,14 +377,10 @@ pub async fn serve(
                 let s = s.map_err(zerr)?;
                 let id = keys::last_chunk(s.key_expr().as_str()).to_string();
                 if s.kind() == SampleKind::Delete {
-                    st.requeue_worker(&id);
+                    st.requeue_worker(&id)?;
                 } else {
                     // Slots arrive with the first heartbeat; until then one.
-                    st.workers.entry(id).or_insert_with(|| WorkerInfo {
-                        slots: 1,
-                        assigned: BTreeSet::new(),
-                        last_seen: Instant::now(),
-                    });
+                    st.workers.entry(id).or_insert_with(|| WorkerInfo::new(1));
                 }
             }
             q = status_q.recv_async() => {
@@ -333,7 +416,7 @@ pub async fn serve(
                 let silent: Vec<String> = st.workers.iter().filter(|(_, w)| now.duration_since(w.last_seen) > silence * 4).map(|(k, _)| k.clone()).collect();
                 for id in silent {
                     // Far past its heartbeat: treat as gone even if its token lingers.
-                    st.requeue_worker(&id);
+                    st.requeue_worker(&id)?;
                 }
                 dispatch(&session, &mut st).await;
             }
@@ -390,6 +473,7 @@ async fn on_outcome(
             );
         }
         Ok((crate::evolve::Counted::New, effects)) => {
+            st.ran_elsewhere(t, &o.worker);
             st.counters.accepted += 1;
             st.trials_done += 1;
             st.queue.remove(&t);
@@ -468,17 +552,36 @@ async fn handle_effects(
 async fn dispatch(session: &Session, st: &mut State) {
     let now = Instant::now();
     let silence = st.cfg.silence;
-    while let Some(&t) = st.queue.first() {
+    let usable = |st: &State, id: &String, w: &WorkerInfo| {
+        now.duration_since(w.last_seen) <= silence && !st.counters.set_aside.contains(id)
+    };
+    let queued: Vec<(u64, u32)> = st.queue.iter().copied().collect();
+    for t in queued {
+        let free = st
+            .workers
+            .iter()
+            .any(|(id, w)| usable(st, id, w) && (w.assigned.len() as u64) < u64::from(w.slots));
+        if !free {
+            break;
+        }
         let Some(opened) = st.opened.get(&t.0) else {
             st.queue.remove(&t);
             continue;
         };
-        // The live worker with the most free slots (ties: smallest id).
+        // A trial that failed somewhere waits for a live worker that has not
+        // failed it, when there is one; among the candidates, the one with the
+        // most free slots (ties: smallest id).
+        let failed = st.run.failed_workers(t.0, t.1);
+        let fresh_exists = st
+            .workers
+            .iter()
+            .any(|(id, w)| usable(st, id, w) && !failed.contains(id));
         let pick = st
             .workers
             .iter()
-            .filter(|(_, w)| now.duration_since(w.last_seen) <= silence)
+            .filter(|(id, w)| usable(st, id, w))
             .filter(|(_, w)| (w.assigned.len() as u64) < u64::from(w.slots))
+            .filter(|(id, _)| !(fresh_exists && failed.contains(*id)))
             .max_by_key(|(id, w)| {
                 (
                     u64::from(w.slots) - w.assigned.len() as u64,
@@ -486,7 +589,7 @@ async fn dispatch(session: &Session, st: &mut State) {
                 )
             })
             .map(|(id, _)| id.clone());
-        let Some(id) = pick else { break };
+        let Some(id) = pick else { continue };
         st.dispatch += 1;
         let req = st.run.request(opened, t.1, st.dispatch);
         st.queue.remove(&t);

@@ -295,8 +295,8 @@ impl Experiment {
     /// Checks every field; the first problem found is returned.
     pub fn validate(&self) -> Result<(), ExperimentError> {
         keys::check_chunk("run name", &self.name).map_err(|m| invalid("name", m))?;
-        if self.iterations == 0 {
-            return Err(invalid("iterations", "must be at least 1"));
+        if self.iterations == 0 || self.iterations > 10_000_000 {
+            return Err(invalid("iterations", "must be in 1..=10000000"));
         }
         if self.trials_per_iteration == 0 {
             return Err(invalid("trials_per_iteration", "must be at least 1"));
@@ -414,8 +414,11 @@ impl Experiment {
             }
         }
         finite_positive("clop.prior_strength", c.prior_strength)?;
-        if c.n_mcmc == 0 {
-            return Err(invalid("clop.n_mcmc", "must be at least 1"));
+        if c.n_mcmc == 0 || c.n_mcmc > 100_000 {
+            return Err(invalid("clop.n_mcmc", "must be in 1..=100000"));
+        }
+        if c.refresh_rate > 1.0 {
+            return Err(invalid("clop.refresh_rate", "must be in [0, 1]"));
         }
         self.physics
             .validate()

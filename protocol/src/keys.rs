@@ -106,6 +106,12 @@ pub fn outcomes(prefix: &str) -> String {
     format!("{prefix}/@outcomes")
 }
 
+/// `<prefix>/@failures`: workers report trials they could not run here.
+#[must_use]
+pub fn failures(prefix: &str) -> String {
+    format!("{prefix}/@failures")
+}
+
 /// `<prefix>/@coordinators/<run>`: the liveliness token of a run's coordinator
 /// (watchers notice a coordinator that stopped).
 #[must_use]

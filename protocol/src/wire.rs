@@ -301,6 +301,40 @@ impl WireMessage for TrialOutcome {
     }
 }
 
+/// A trial a worker could not run: an error, a panic, or a non-finite result.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrialFailure {
+    /// Run name.
+    pub run: String,
+    /// CLOP iteration index i.
+    pub iteration: u64,
+    /// Trial index k.
+    pub trial: u32,
+    /// The seed of the request.
+    pub seed: u64,
+    /// Dispatch number of the request answered.
+    pub dispatch: u64,
+    /// Id of the worker that tried it.
+    pub worker: String,
+    /// What went wrong (error text, panic message, the non-finite value).
+    pub reason: String,
+}
+
+impl WireMessage for TrialFailure {
+    const NAME: &'static str = "TrialFailure";
+    const KIND: u8 = 6;
+    fn validate(&self) -> Check {
+        chunk("run", &self.run)?;
+        if self.worker.len() > 128 {
+            return Err(("worker", "longer than 128 bytes".into()));
+        }
+        if self.reason.len() > 4096 {
+            return Err(("reason", "longer than 4096 bytes".into()));
+        }
+        Ok(())
+    }
+}
+
 /// pickOut's decision (Algorithm 2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "SCREAMING_SNAKE_CASE")]

@@ -2,13 +2,14 @@
 //!
 //! Modules: [`nao`] (the league's NAO in rapier3d, its walk and trials),
 //! [`synthetic`] (a cheap stand-in model for tests and farm benchmarks),
-//! [`service`] (the zenoh worker).
+//! [`service`] (the zenoh worker), [`fault`] (run-time fault hooks for tests).
 //! [`run_trial`] is the one trial interface, a pure function of the request.
 //!
 //! This crate must not keep state between trials or decide anything about
 //! the optimisation: it runs what it is asked and reports what happened.
 #![warn(missing_docs)]
 
+pub mod fault;
 pub mod nao;
 pub mod service;
 pub mod synthetic;
@@ -28,6 +29,25 @@ pub struct TrialRun {
     pub fall_time_s: Option<f64>,
     /// Simulated time run, s.
     pub sim_time_s: f64,
+}
+
+impl TrialRun {
+    /// Checks every number is finite and the fall is consistent.
+    pub fn check(&self) -> Result<(), String> {
+        for (name, v) in [
+            ("x_m", self.x_m),
+            ("y_m", self.y_m),
+            ("sim_time_s", self.sim_time_s),
+        ] {
+            if !v.is_finite() {
+                return Err(format!("non-finite result: {name} = {v}"));
+            }
+        }
+        match self.fall_time_s {
+            Some(t) if !t.is_finite() => Err(format!("non-finite result: fall_time_s = {t}")),
+            _ => Ok(()),
+        }
+    }
 }
 
 /// Why a trial could not run.

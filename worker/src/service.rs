@@ -12,7 +12,7 @@ use std::{
 
 use protocol::{
     keys,
-    wire::{TrialOutcome, TrialRequest, WireMessage, WorkerPresence},
+    wire::{TrialFailure, TrialOutcome, TrialRequest, WireMessage, WorkerPresence},
 };
 use zenoh::Session;
 
@@ -60,8 +60,16 @@ fn zerr(e: impl std::fmt::Display) -> WorkerError {
 pub struct WorkerSummary {
     /// Trials run and reported.
     pub trials: u64,
-    /// Requests refused (undecodable, failed to build).
+    /// Requests refused (undecodable) or trials that failed (reported as failures).
     pub refused: u64,
+}
+
+/// The text of a panic's payload.
+fn panic_text(p: Box<dyn std::any::Any + Send>) -> String {
+    p.downcast_ref::<&str>()
+        .map(|s| (*s).to_string())
+        .or_else(|| p.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "(no message)".into())
 }
 
 /// Serves trials until `shutdown` turns true, then finishes what it holds,
@@ -121,32 +129,39 @@ pub async fn serve(
                 busy.fetch_add(1, Ordering::Relaxed);
                 tasks.spawn(async move {
                     let started = Instant::now();
+                    let (run, iteration, trial, seed, dispatch) =
+                        (req.run.clone(), req.iteration, req.trial, req.seed, req.dispatch);
                     let r = tokio::task::spawn_blocking(move || {
-                        let out = crate::run_trial(&req);
+                        let out = crate::fault::run_trial(&req);
                         let rest = min_trial.saturating_sub(started.elapsed());
                         if !rest.is_zero() {
                             std::thread::sleep(rest);
                         }
-                        (req, out)
+                        out
                     })
                     .await;
                     busy.fetch_sub(1, Ordering::Relaxed);
                     drop(permit);
-                    let Ok((req, out)) = r else { return false };
-                    match out {
-                        Ok(run) => {
+                    let result = match r {
+                        Ok(Ok(t)) => t.check().map(|()| t),
+                        Ok(Err(e)) => Err(e.to_string()),
+                        Err(e) if e.is_panic() => Err(format!("panic: {}", panic_text(e.into_panic()))),
+                        Err(e) => Err(format!("the trial's thread ended: {e}")),
+                    };
+                    match result {
+                        Ok(t) => {
                             let o = TrialOutcome {
-                                run: req.run.clone(),
-                                iteration: req.iteration,
-                                trial: req.trial,
-                                seed: req.seed,
-                                dispatch: req.dispatch,
+                                run,
+                                iteration,
+                                trial,
+                                seed,
+                                dispatch,
                                 worker: id,
-                                fell: run.fell,
-                                x_m: run.x_m,
-                                y_m: run.y_m,
-                                fall_time_s: run.fall_time_s,
-                                sim_time_s: run.sim_time_s,
+                                fell: t.fell,
+                                x_m: t.x_m,
+                                y_m: t.y_m,
+                                fall_time_s: t.fall_time_s,
+                                sim_time_s: t.sim_time_s,
                                 wall_time_s: started.elapsed().as_secs_f64(),
                             };
                             if let Err(e) = session.put(keys::outcomes(&prefix), o.encode()).await {
@@ -154,8 +169,12 @@ pub async fn serve(
                             }
                             true
                         }
-                        Err(e) => {
-                            tracing::error!(error = %e, iteration = req.iteration, trial = req.trial, "trial could not run");
+                        Err(reason) => {
+                            tracing::error!(%reason, iteration, trial, "trial could not run; reporting it");
+                            let f = TrialFailure { run, iteration, trial, seed, dispatch, worker: id, reason };
+                            if let Err(e) = session.put(keys::failures(&prefix), f.encode()).await {
+                                tracing::warn!(error = %e, "publishing a failure failed");
+                            }
                             false
                         }
                     }

@@ -1,0 +1,126 @@
+//! One coordinator per run directory: an exclusive advisory lock on
+//! `DIR/lock`, held for the run's life and released by the kernel when the
+//! process ends (however it ends). The file records the holder's pid and host
+//! for the message a second coordinator prints. Readers (`history`,
+//! `journal check`) never take it; they only ask whether it is held.
+//! Must not: delete or truncate anything but the lock file's own text.
+
+use std::{
+    fs::{File, OpenOptions},
+    io::{Read, Seek, Write},
+    path::{Path, PathBuf},
+};
+
+/// Name of the lock file inside a run directory.
+pub const LOCK_FILE: &str = "lock";
+
+/// A held run lock; dropping it releases the lock.
+#[derive(Debug)]
+pub struct RunLock {
+    _file: File,
+}
+
+/// Why the lock was not taken.
+#[derive(Debug, thiserror::Error)]
+pub enum LockError {
+    /// Another process holds it.
+    #[error(
+        "{dir} is in use by another coordinator ({holder}); one coordinator per run directory"
+    )]
+    Held {
+        /// The run directory.
+        dir: String,
+        /// "pid N on host H", as the holder wrote it.
+        holder: String,
+    },
+    /// File-system error.
+    #[error("{path}: {cause}")]
+    Io {
+        /// The lock file.
+        path: PathBuf,
+        /// The cause.
+        cause: std::io::Error,
+    },
+}
+
+fn host() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .or_else(|_| std::fs::read_to_string("/etc/hostname"))
+        .map(|h| h.trim().to_string())
+        .ok()
+        .filter(|h| !h.is_empty())
+        .unwrap_or_else(|| "an unknown host".into())
+}
+
+impl RunLock {
+    /// Takes the lock of `dir` (created if missing), or says who holds it.
+    pub fn acquire(dir: &Path) -> Result<Self, LockError> {
+        let path = dir.join(LOCK_FILE);
+        let io = |cause| LockError::Io {
+            path: path.clone(),
+            cause,
+        };
+        std::fs::create_dir_all(dir).map_err(io)?;
+        let mut file = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .map_err(io)?;
+        match file.try_lock() {
+            Ok(()) => {}
+            Err(std::fs::TryLockError::WouldBlock) => {
+                let mut text = String::new();
+                let _ = file.read_to_string(&mut text);
+                let holder = text.trim();
+                return Err(LockError::Held {
+                    dir: dir.display().to_string(),
+                    holder: if holder.is_empty() {
+                        "a process that has not yet written its pid".into()
+                    } else {
+                        holder.to_string()
+                    },
+                });
+            }
+            Err(std::fs::TryLockError::Error(e)) => return Err(io(e)),
+        }
+        let me = format!("pid {} on {}\n", std::process::id(), host());
+        file.set_len(0)
+            .and_then(|()| file.rewind())
+            .and_then(|()| file.write_all(me.as_bytes()))
+            .and_then(|()| file.sync_all())
+            .map_err(io)?;
+        Ok(Self { _file: file })
+    }
+
+    /// Whether a coordinator holds `dir`'s lock now (a reader's question).
+    #[must_use]
+    pub fn is_held(dir: &Path) -> bool {
+        let Ok(file) = File::open(dir.join(LOCK_FILE)) else {
+            return false;
+        };
+        matches!(
+            file.try_lock_shared(),
+            Err(std::fs::TryLockError::WouldBlock)
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_second_holder_is_refused_with_the_first_ones_pid() {
+        let d = std::env::temp_dir().join(format!("naofarm-lock-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        let a = RunLock::acquire(&d).unwrap();
+        assert!(RunLock::is_held(&d));
+        let e = RunLock::acquire(&d).unwrap_err().to_string();
+        assert!(e.contains(&format!("pid {}", std::process::id())), "{e}");
+        drop(a);
+        assert!(!RunLock::is_held(&d));
+        let _b = RunLock::acquire(&d).unwrap();
+    }
+}

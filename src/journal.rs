@@ -1,0 +1,132 @@
+//! `naofarm journal check DIR` and `naofarm journal salvage DIR --out NEW_DIR`.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::anyhow;
+use clap::Subcommand;
+use coordinator::{
+    journal::{Journal, Tail},
+    run::{read_run, salvage, RunError, RunView},
+};
+
+use crate::cli::{emit, Failure};
+
+/// The journal commands.
+#[derive(Subcommand, Debug)]
+pub enum JournalCommand {
+    /// Verify every frame of a run's journal: exit 0, or 1 with the offset of the damage.
+    Check {
+        /// The run directory.
+        dir: PathBuf,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Write every valid record of a damaged journal into a new run directory that resumes.
+    Salvage {
+        /// The damaged run directory (only read).
+        dir: PathBuf,
+        /// The new run directory (must hold no journal).
+        #[arg(long)]
+        out: PathBuf,
+    },
+}
+
+/// Says on stderr what a torn tail means, unless the run is live (then it is in progress).
+pub fn note_tail(dir: &Path, view: &RunView) {
+    if let (Tail::Torn { offset, len }, false) = (&view.tail, view.live) {
+        eprintln!(
+            "note: {}: the last {len} bytes (from offset {offset}) are an interrupted append; \
+             resuming the run saves them to journal.nfj.torn-{offset} and cuts them",
+            Journal::path_in(dir).display()
+        );
+    }
+}
+
+/// Runs a journal command.
+pub fn journal(cmd: JournalCommand) -> Result<(), Failure> {
+    match cmd {
+        JournalCommand::Check { dir, json } => check(&dir, json),
+        JournalCommand::Salvage { dir, out } => {
+            if !Journal::path_in(&dir).exists() {
+                return Err(Failure::Usage(anyhow!(
+                    "{}: no journal ({})",
+                    dir.display(),
+                    Journal::path_in(&dir).display()
+                )));
+            }
+            let s = salvage(&dir, &out).map_err(|e| match e {
+                RunError::OtherExperiment { .. } | RunError::Locked(_) => Failure::Usage(e.into()),
+                e => Failure::Job(e.into()),
+            })?;
+            let spans: Vec<String> = s
+                .skipped
+                .iter()
+                .map(|(o, l)| format!("{l} bytes at offset {o}"))
+                .collect();
+            emit(&format!(
+                "salvaged {} into {}: {} valid records read, skipped {}; {} outcomes carried over, {} left out \
+                 (their iteration needs lost outcomes first; they will be run again), {} iterations decided. \
+                 {} is unchanged; resume with `naofarm run EXPERIMENT --out {}`\n",
+                dir.display(),
+                out.display(),
+                s.records,
+                if spans.is_empty() { "nothing".into() } else { spans.join(", ") },
+                s.outcomes,
+                s.dropped,
+                s.decided,
+                dir.display(),
+                out.display()
+            ))
+        }
+    }
+}
+
+fn check(dir: &Path, json: bool) -> Result<(), Failure> {
+    let path = Journal::path_in(dir);
+    if !path.exists() {
+        return Err(Failure::Usage(anyhow!("{}: no journal", dir.display())));
+    }
+    let view = read_run(dir).map_err(|e| Failure::Job(e.into()))?;
+    let tail = match (&view.tail, view.live) {
+        (Tail::Clean, _) => "clean".to_string(),
+        (Tail::Torn { offset, len }, true) => {
+            format!("{len} bytes at offset {offset} being written (the run is live)")
+        }
+        (Tail::Torn { offset, len }, false) => format!(
+            "torn: {len} bytes at offset {offset} are an interrupted append (a resume saves and cuts them)"
+        ),
+        (Tail::Damaged { .. }, _) => "damaged".into(),
+    };
+    if json {
+        let v = serde_json::json!({
+            "journal": path.display().to_string(),
+            "format": view.format,
+            "created_by": view.version,
+            "run": view.experiment.name,
+            "records": view.records,
+            "decided": view.decided.len(),
+            "planned": view.experiment.iterations,
+            "extensions": view.extensions,
+            "live": view.live,
+            "tail": tail,
+        });
+        return emit(&format!("{v}\n"));
+    }
+    emit(&format!(
+        "{}: format {}, created by naofarm {}, run `{}`; {} records, {} of {} iterations decided{}; tail {}\n",
+        path.display(),
+        view.format,
+        view.version,
+        view.experiment.name,
+        view.records,
+        view.decided.len(),
+        view.experiment.iterations,
+        if view.extensions.is_empty() {
+            String::new()
+        } else {
+            format!(" (extended to {:?})", view.extensions)
+        },
+        tail
+    ))
+}

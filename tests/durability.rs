@@ -1,0 +1,284 @@
+//! The run directory survives damage, bad resumes and extensions: each
+//! scenario through the CLI, as real processes, with its exit code and message,
+//! and the journal's bytes unchanged wherever nothing was torn.
+#![allow(clippy::unwrap_used)]
+
+mod util;
+
+use std::path::{Path, PathBuf};
+
+use util::{fails, naofarm, root, scratch, succeed};
+
+fn synthetic() -> PathBuf {
+    root().join("experiments/synthetic.toml")
+}
+
+/// `naofarm run` of the synthetic experiment with `iterations` into `out`.
+fn run(out: &Path, iterations: u64) -> std::process::Command {
+    let mut c = naofarm();
+    c.args(["run", "--json", "--workers", "1", "--iterations"])
+        .arg(iterations.to_string())
+        .arg(synthetic())
+        .arg("--out")
+        .arg(out);
+    c
+}
+
+fn history(dir: &Path) -> Vec<u8> {
+    succeed(naofarm().arg("history").arg(dir).arg("--csv")).stdout
+}
+
+fn journal(dir: &Path) -> PathBuf {
+    dir.join("journal.nfj")
+}
+
+/// Offsets of the journal's frames (format 2: each starts with `NFR2`).
+fn frames(bytes: &[u8]) -> Vec<usize> {
+    (16..bytes.len().saturating_sub(4))
+        .filter(|&i| &bytes[i..i + 4] == b"NFR2")
+        .collect()
+}
+
+#[test]
+fn a_flipped_length_bit_is_refused_everywhere_and_salvage_recovers_the_run() {
+    let dir = scratch("flip");
+    let reference = dir.join("reference");
+    succeed(&mut run(&reference, 12));
+    let want = history(&reference);
+    let bytes = std::fs::read(journal(&reference)).unwrap();
+    let third = frames(&bytes)[2];
+    let damaged_dir = dir.join("damaged");
+    std::fs::create_dir_all(&damaged_dir).unwrap();
+    let mut damaged = bytes.clone();
+    damaged[third + 5] ^= 0x01; // the length field's second byte
+    std::fs::write(journal(&damaged_dir), &damaged).unwrap();
+
+    let err = fails(naofarm().arg("history").arg(&damaged_dir), 1);
+    assert!(err.contains(&format!("byte offset {third}")), "{err}");
+    let err = fails(naofarm().args(["journal", "check"]).arg(&damaged_dir), 1);
+    assert!(err.contains(&format!("byte offset {third}")), "{err}");
+    let err = fails(&mut run(&damaged_dir, 12), 1);
+    assert!(
+        err.contains(&format!("byte offset {third}"))
+            && err.contains("valid record")
+            && err.contains("journal salvage"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read(journal(&damaged_dir)).unwrap(),
+        damaged,
+        "nothing changed"
+    );
+
+    let salvaged = dir.join("salvaged");
+    let out = succeed(
+        naofarm()
+            .args(["journal", "salvage"])
+            .arg(&damaged_dir)
+            .arg("--out")
+            .arg(&salvaged),
+    );
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(said.contains(&format!("at offset {third}")), "{said}");
+    assert_eq!(
+        std::fs::read(journal(&damaged_dir)).unwrap(),
+        damaged,
+        "salvage only reads"
+    );
+    succeed(naofarm().args(["journal", "check"]).arg(&salvaged));
+    succeed(&mut run(&salvaged, 12));
+    assert_eq!(
+        history(&salvaged),
+        want,
+        "the salvaged run resumes to the same history"
+    );
+}
+
+#[test]
+fn a_zero_filled_tail_is_saved_aside_and_the_run_resumes() {
+    let dir = scratch("zeros");
+    let reference = dir.join("reference");
+    succeed(&mut run(&reference, 10));
+    let want = history(&reference);
+    let bytes = std::fs::read(journal(&reference)).unwrap();
+    // A crash after 5 decisions' worth of records, leaving zeros where the next append was.
+    let cut = frames(&bytes)[bytes.len() / 2 % frames(&bytes).len()];
+    let zeros = dir.join("zeros");
+    std::fs::create_dir_all(&zeros).unwrap();
+    let mut b = bytes[..cut].to_vec();
+    b.extend(std::iter::repeat_n(0u8, 4096));
+    std::fs::write(journal(&zeros), &b).unwrap();
+    let check = succeed(naofarm().args(["journal", "check"]).arg(&zeros));
+    assert!(String::from_utf8_lossy(&check.stdout).contains("torn"));
+    succeed(&mut run(&zeros, 10));
+    assert_eq!(history(&zeros), want);
+    let side = std::fs::read(zeros.join(format!("journal.nfj.torn-{cut}"))).unwrap();
+    assert_eq!(
+        side,
+        vec![0u8; 4096],
+        "the cut bytes are kept beside the journal"
+    );
+}
+
+#[test]
+fn a_full_disk_stops_the_run_with_nothing_half_applied_and_it_resumes() {
+    let dir = scratch("full");
+    let reference = dir.join("reference");
+    succeed(&mut run(&reference, 8));
+    let want = history(&reference);
+    let out = dir.join("run");
+    let limit = std::fs::metadata(journal(&reference)).unwrap().len() / 2;
+    let err = fails(
+        run(&out, 8).env("NAOFARM_FAULT_JOURNAL_FULL_AFTER", limit.to_string()),
+        1,
+    );
+    assert!(err.contains("no space left"), "{err}");
+    let check = succeed(naofarm().args(["journal", "check", "--json"]).arg(&out));
+    let v: serde_json::Value = serde_json::from_slice(&check.stdout).unwrap();
+    assert_eq!(v["tail"], "clean", "no partial frame left: {v}");
+    assert!(
+        v["decided"].as_u64().unwrap() < 8,
+        "the run stopped part-way: {v}"
+    );
+    succeed(&mut run(&out, 8));
+    assert_eq!(history(&out), want);
+}
+
+#[test]
+fn extending_a_finished_run_gives_the_longer_runs_history() {
+    let dir = scratch("extend");
+    let long = dir.join("long");
+    succeed(&mut run(&long, 80));
+    let short = dir.join("short");
+    succeed(&mut run(&short, 60));
+    let out = succeed(&mut run(&short, 80));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("extending"));
+    assert_eq!(history(&short), history(&long), "60 + 20 = 80, bit for bit");
+    let check = succeed(naofarm().args(["journal", "check", "--json"]).arg(&short));
+    let v: serde_json::Value = serde_json::from_slice(&check.stdout).unwrap();
+    assert_eq!(v["extensions"], serde_json::json!([80]));
+    assert_eq!(v["decided"], 80);
+    // Shorter, or another seed: refused, naming each field; nothing written.
+    let before = std::fs::read(journal(&short)).unwrap();
+    let err = fails(&mut run(&short, 70), 2);
+    assert!(
+        err.contains("iterations") && err.contains("extended, not shortened"),
+        "{err}"
+    );
+    let err = fails(run(&short, 80).args(["--seed", "9", "--model", "nao"]), 2);
+    assert!(err.contains("seed") && err.contains("model"), "{err}");
+    assert_eq!(std::fs::read(journal(&short)).unwrap(), before);
+}
+
+#[test]
+fn from_a_run_with_other_parameters_is_refused_by_name() {
+    let dir = scratch("from");
+    let one = dir.join("physical");
+    succeed(
+        naofarm()
+            .args([
+                "run",
+                "--json",
+                "--workers",
+                "1",
+                "--iterations",
+                "3",
+                "--model",
+                "synthetic",
+            ])
+            .arg(root().join("experiments/physical.toml"))
+            .arg("--out")
+            .arg(&one),
+    );
+    let err = fails(
+        naofarm()
+            .args([
+                "run",
+                "--workers",
+                "1",
+                "--iterations",
+                "2",
+                "--model",
+                "synthetic",
+            ])
+            .arg(root().join("experiments/physical-technical.toml"))
+            .arg("--out")
+            .arg(dir.join("five"))
+            .arg("--from")
+            .arg(&one),
+        2,
+    );
+    assert!(
+        err.contains("ThighRelHip2_Z") && err.contains("xlength_step_max"),
+        "{err}"
+    );
+    assert!(!dir.join("five").join("journal.nfj").exists());
+    // Same names, narrower bounds: only the points inside are used, and it says how many.
+    let text = std::fs::read_to_string(root().join("experiments/physical.toml"))
+        .unwrap()
+        .replace("lower = -0.10", "lower = -0.05");
+    let narrow = dir.join("narrow.toml");
+    std::fs::write(&narrow, text).unwrap();
+    let out = succeed(
+        naofarm()
+            .args([
+                "run",
+                "--json",
+                "--workers",
+                "1",
+                "--iterations",
+                "2",
+                "--model",
+                "synthetic",
+            ])
+            .arg(&narrow)
+            .arg("--out")
+            .arg(dir.join("narrow"))
+            .arg("--from")
+            .arg(&one),
+    );
+    assert!(String::from_utf8_lossy(&out.stderr).contains("of its 3 points lie inside"));
+}
+
+#[test]
+fn absurd_numbers_are_usage_errors_never_panics() {
+    let dir = scratch("numbers");
+    for (flag, value) in [
+        ("--lease-s", "1e20"),
+        ("--lease-s", "1e-9"),
+        ("--lease-s", "nan"),
+        ("--lease-s", "-0"),
+        ("--lease-s", "inf"),
+        ("--seed", "18446744073709551616"),
+        ("--iterations", "1e300"),
+        ("--workers", "0"),
+        ("--workers", "100000"),
+    ] {
+        let err = fails(
+            naofarm()
+                .arg("run")
+                .arg(synthetic())
+                .arg("--out")
+                .arg(dir.join("r"))
+                .args([flag, value]),
+            2,
+        );
+        assert!(
+            err.contains(flag.trim_start_matches("--")) || err.contains(value),
+            "{flag} {value}: {err}"
+        );
+        assert!(!dir.join("r").join("journal.nfj").exists());
+    }
+    for value in ["1e20", "0", "nan"] {
+        fails(naofarm().args(["watch", "x", "--timeout-s", value]), 2);
+    }
+    for (field, value) in [("n_mcmc", "100000000"), ("refresh_rate", "2.0")] {
+        let text = std::fs::read_to_string(synthetic())
+            .unwrap()
+            .replace("[clop]", &format!("[clop]\n{field} = {value}"));
+        let p = dir.join(format!("{field}.toml"));
+        std::fs::write(&p, text).unwrap();
+        let err = fails(naofarm().arg("check").arg(&p), 2);
+        assert!(err.contains(field), "{err}");
+    }
+}

@@ -1,0 +1,59 @@
+//! Fault hooks for tests, switched on at run time by an environment variable
+//! (never by a second build): `NAOFARM_FAULT_TRIAL=MODE[@I/K]` makes every
+//! trial (or only trial K of iteration I) misbehave, where MODE is `fail` (an
+//! error), `panic`, or `nan` (a non-finite result). Without the variable,
+//! [`run_trial`] is exactly [`crate::run_trial`].
+
+use protocol::TrialRequest;
+
+use crate::{TrialError, TrialRun};
+
+/// The environment variable that switches a fault on.
+pub const TRIAL_FAULT_VAR: &str = "NAOFARM_FAULT_TRIAL";
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Mode {
+    Fail,
+    Panic,
+    Nan,
+}
+
+fn fault_for(req: &TrialRequest) -> Option<Mode> {
+    let spec = std::env::var(TRIAL_FAULT_VAR).ok()?;
+    let (mode, target) = match spec.split_once('@') {
+        Some((m, t)) => (m, Some(t)),
+        None => (spec.as_str(), None),
+    };
+    let mode = match mode {
+        "fail" => Mode::Fail,
+        "panic" => Mode::Panic,
+        "nan" => Mode::Nan,
+        _ => return None,
+    };
+    if let Some(t) = target {
+        let (i, k) = t.split_once('/')?;
+        if i.parse::<u64>().ok()? != req.iteration || k.parse::<u32>().ok()? != req.trial {
+            return None;
+        }
+    }
+    Some(mode)
+}
+
+/// Runs one trial, unless a fault hook says otherwise.
+pub fn run_trial(req: &TrialRequest) -> Result<TrialRun, TrialError> {
+    match fault_for(req) {
+        None => crate::run_trial(req),
+        Some(Mode::Fail) => Err(TrialError::Model(format!(
+            "fault hook {TRIAL_FAULT_VAR}: trial {}/{} fails",
+            req.iteration, req.trial
+        ))),
+        Some(Mode::Panic) => panic!(
+            "fault hook {TRIAL_FAULT_VAR}: trial {}/{} panics",
+            req.iteration, req.trial
+        ),
+        Some(Mode::Nan) => crate::run_trial(req).map(|mut t| {
+            t.x_m = f64::NAN;
+            t
+        }),
+    }
+}
