@@ -163,6 +163,10 @@ pub struct JobArgs {
     /// Seconds a worker may hold a trial before it is given to another.
     #[arg(long, default_value_t = 120.0)]
     pub lease_s: f64,
+    /// Distinct workers that may fail one trial before the run stops (1–100;
+    /// a resumed run may raise it to retry the trial that stopped it).
+    #[arg(long, default_value_t = 3)]
+    pub max_trial_failures: u32,
 }
 
 /// Benchmarks.

@@ -91,12 +91,19 @@ fn open_run(job: &JobArgs) -> Result<(Run, Vec<coordinator::run::Effect>), Failu
         }
         None => None,
     };
-    let opened = Run::open(&job.out, exp, &text, imported).map_err(|e| match e {
+    if !(1..=100).contains(&job.max_trial_failures) {
+        return Err(Failure::Usage(anyhow!(
+            "--max-trial-failures {}: must be in 1..=100",
+            job.max_trial_failures
+        )));
+    }
+    let mut opened = Run::open(&job.out, exp, &text, imported).map_err(|e| match e {
         coordinator::run::RunError::OtherExperiment { .. }
         | coordinator::run::RunError::Locked(_)
         | coordinator::run::RunError::Diverged { .. } => Failure::Usage(e.into()),
         e => Failure::Job(e.into()),
     })?;
+    opened.0.set_failure_limit(job.max_trial_failures as usize);
     if let Some(before) = opened.0.extended_from() {
         eprintln!(
             "extending {} from {before} to {} iterations",

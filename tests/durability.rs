@@ -16,7 +16,7 @@ fn synthetic() -> PathBuf {
 /// `naofarm run` of the synthetic experiment with `iterations` into `out`.
 fn run(out: &Path, iterations: u64) -> std::process::Command {
     let mut c = naofarm();
-    c.args(["run", "--json", "--workers", "1", "--iterations"])
+    c.args(["run", "--json", "--iterations"])
         .arg(iterations.to_string())
         .arg(synthetic())
         .arg("--out")
@@ -280,5 +280,38 @@ fn absurd_numbers_are_usage_errors_never_panics() {
         std::fs::write(&p, text).unwrap();
         let err = fails(naofarm().arg("check").arg(&p), 2);
         assert!(err.contains(field), "{err}");
+    }
+}
+
+#[test]
+fn a_trial_that_fails_on_every_worker_stops_the_run_with_the_reasons() {
+    let dir = scratch("fails");
+    let reference = dir.join("reference");
+    succeed(&mut run(&reference, 8));
+    let want = history(&reference);
+    for (mode, says) in [
+        ("fail", "fails"),
+        ("panic", "panic: fault hook"),
+        ("nan", "non-finite result"),
+    ] {
+        let out = dir.join(mode);
+        let err = fails(
+            run(&out, 8)
+                .args(["--workers", "3"])
+                .env("NAOFARM_FAULT_TRIAL", format!("{mode}@2/3")),
+            1,
+        );
+        assert!(
+            err.contains("trial 3 of iteration 2 failed 3 times on 3 distinct workers")
+                && err.contains("ThighRelHip2_Z=")
+                && err.matches(says).count() >= 3,
+            "{mode}: {err}"
+        );
+        // A resumed run keeps the counts: it stops again at once, naming the trial…
+        let again = fails(&mut run(&out, 8), 1);
+        assert!(again.contains("trial 3 of iteration 2"), "{again}");
+        // …unless it is allowed more workers; then the trial runs and the history is the run's.
+        succeed(run(&out, 8).args(["--max-trial-failures", "4"]));
+        assert_eq!(history(&out), want, "{mode}");
     }
 }

@@ -102,7 +102,7 @@ mod farm {
         journal::{Journal, Record},
     };
 
-    use super::{naofarm, scratch};
+    use super::{naofarm, scratch, succeed};
     // `events` parses the JSON lines of run, coordinator and watch.
 
     const TIMEOUT: Duration = Duration::from_secs(120);
@@ -389,6 +389,63 @@ n_mcmc = 100
         let records = journal(&out);
         assert_every_trial_once(&records, 20);
         assert_eq!(bits(&decided(&records)), bits(&reference));
+    }
+
+    #[test]
+    fn a_worker_that_fails_every_trial_is_set_aside_and_the_history_is_the_runs() {
+        let dir = scratch("set-aside");
+        let exp = experiment(&dir, 20);
+        let local = dir.join("local");
+        succeed(
+            naofarm()
+                .args(["run", "--json", "--workers", "2"])
+                .arg(&exp)
+                .arg("--out")
+                .arg(&local),
+        );
+        let port = free_port();
+        let out = dir.join("run");
+        let mut bad = naofarm()
+            .args(["worker", "--connect", &format!("tcp/127.0.0.1:{port}")])
+            .args(["--slots", "2", "--min-trial-ms", "5"])
+            .env("NAOFARM_FAULT_TRIAL", "fail")
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        // All workers first (they retry until the coordinator listens); the bad
+        // one has the most free slots, so it is offered work first.
+        let mut ws = vec![worker(port, 1, 20), worker(port, 1, 20)];
+        let mut c = Coordinator::start(&exp, &out, port, 30.0);
+        let status = c.wait_exit();
+        kill_all(&mut ws);
+        let _ = bad.kill();
+        let _ = bad.wait();
+        assert!(status.success(), "{:?}", c.seen);
+        let finished: serde_json::Value = c
+            .seen
+            .iter()
+            .find(|l| l.starts_with("{\"accepted\"") || l.contains("\"event\":\"finished\""))
+            .map(|l| serde_json::from_str(l).unwrap())
+            .expect("a finished line");
+        let set_aside = finished["set_aside"].as_array().expect("set_aside");
+        assert_eq!(set_aside.len(), 1, "{finished}");
+        assert!(finished["failures"].as_u64().unwrap() >= 3, "{finished}");
+        let records = journal(&out);
+        assert_every_trial_once(&records, 20);
+        let failed: Vec<&Record> = records
+            .iter()
+            .filter(|r| matches!(r, Record::Failed { worker, .. } if serde_json::json!(worker) == set_aside[0]))
+            .collect();
+        assert!(
+            failed.len() >= 3,
+            "the failures are journaled with their worker"
+        );
+        assert_eq!(
+            bits(&decided(&records)),
+            bits(&decided(&journal(&local))),
+            "the same history as the run alone"
+        );
     }
 
     #[test]

@@ -93,13 +93,14 @@ pub struct Run {
     resumed: bool,
     extended_from: Option<u64>,
     failures: BTreeMap<(u64, u32), Vec<(String, String)>>,
+    failure_limit: usize,
     _lock: RunLock,
 }
 
-/// A trial stops the run when it has failed on this many distinct workers.
+/// By default a trial stops the run when it has failed on this many distinct
+/// workers (or twice as many times in all: a small fleet retrying it on the
+/// same workers). [`Run::set_failure_limit`] changes it.
 pub const DISTINCT_FAILURES: usize = 3;
-/// …or this many times in all (a small fleet retrying it on the same workers).
-pub const TOTAL_FAILURES: usize = 6;
 
 /// What a trial's failure means for the run.
 #[derive(Debug, Clone, PartialEq)]
@@ -250,6 +251,7 @@ impl Run {
             resumed: false,
             extended_from: None,
             failures: BTreeMap::new(),
+            failure_limit: DISTINCT_FAILURES,
             _lock: lock,
         };
         let effects = run.act(actions)?;
@@ -346,6 +348,7 @@ impl Run {
             resumed: true,
             extended_from: extend.then_some(theirs.iterations),
             failures,
+            failure_limit: DISTINCT_FAILURES,
             _lock: lock,
         };
         for o in opened_records {
@@ -469,7 +472,7 @@ impl Run {
             return FailureVerdict::Retry;
         };
         let distinct: BTreeSet<&str> = reasons.iter().map(|(w, _)| w.as_str()).collect();
-        if distinct.len() < DISTINCT_FAILURES && reasons.len() < TOTAL_FAILURES {
+        if distinct.len() < self.failure_limit && reasons.len() < 2 * self.failure_limit {
             return FailureVerdict::Retry;
         }
         let params = self
@@ -485,6 +488,12 @@ impl Run {
             params,
             reasons: reasons.clone(),
         })
+    }
+
+    /// Sets how many distinct workers may fail one trial before the run stops
+    /// (at least 1; a resumed run may raise it to retry a trial that stopped it).
+    pub fn set_failure_limit(&mut self, distinct_workers: usize) {
+        self.failure_limit = distinct_workers.max(1);
     }
 
     /// A pending trial that has already failed too often (a resumed run keeps the counts).

@@ -402,23 +402,34 @@ impl Experiment {
                 format!("beta ({}) must be below alpha ({})", k.beta, k.alpha),
             ));
         }
-        let c = &self.clop;
         for (field, v) in [
-            ("clop.h", c.h),
-            ("clop.draw_elo", c.draw_elo),
-            ("clop.refresh_rate", c.refresh_rate),
-            ("clop.localization_power", c.localization_power),
+            ("pickout.xy_ratio", k.xy_ratio),
+            ("pickout.alpha", k.alpha),
+            ("pickout.beta", k.beta),
+            ("pickout.gamma", k.gamma),
         ] {
-            if !v.is_finite() || v < 0.0 {
-                return Err(invalid(field, format!("{v} is not a finite number >= 0")));
+            if v > 1000.0 {
+                return Err(invalid(field, format!("{v} is above 1000")));
             }
+        }
+        let c = &self.clop;
+        for (field, v, hi) in [
+            ("clop.h", c.h, 100.0),
+            ("clop.draw_elo", c.draw_elo, 10_000.0),
+            ("clop.refresh_rate", c.refresh_rate, 1.0),
+            ("clop.localization_power", c.localization_power, 10.0),
+            ("clop.prior_strength", c.prior_strength, 1e6),
+        ] {
+            if !v.is_finite() || v < 0.0 || v > hi {
+                return Err(invalid(field, format!("{v} is not in [0, {hi}]")));
+            }
+        }
+        if c.max_weight_iterations > 1000 {
+            return Err(invalid("clop.max_weight_iterations", "must be in 0..=1000"));
         }
         finite_positive("clop.prior_strength", c.prior_strength)?;
         if c.n_mcmc == 0 || c.n_mcmc > 100_000 {
             return Err(invalid("clop.n_mcmc", "must be in 1..=100000"));
-        }
-        if c.refresh_rate > 1.0 {
-            return Err(invalid("clop.refresh_rate", "must be in [0, 1]"));
         }
         self.physics
             .validate()
