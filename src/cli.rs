@@ -281,13 +281,25 @@ pub(crate) fn parse_params(params: &[String]) -> Result<Vec<(String, f64)>, Fail
         .collect()
 }
 
-fn model(robot_type: u8, params: &[String], json: bool) -> Result<(), Failure> {
-    use worker::nao::model::{Morphology, NaoModel};
-    let params = parse_params(params)?;
+/// The league's type `robot_type` with morphology overrides NAME=VALUE (a
+/// walk parameter or an unknown name is a usage error).
+pub(crate) fn morphology(
+    robot_type: u8,
+    params: &[String],
+) -> Result<worker::nao::model::Morphology, Failure> {
+    use worker::nao::model::{ModelError, Morphology};
     let mut m = Morphology::of_type(robot_type).map_err(|e| Failure::Usage(e.into()))?;
-    for (name, v) in &params {
-        m.set(name, *v).map_err(|e| Failure::Usage(e.into()))?;
+    for (name, v) in parse_params(params)? {
+        let p = protocol::params::find(&name).ok_or(ModelError::Unknown(name.clone()));
+        p.and_then(|p| m.set(p.param, v))
+            .map_err(|e| Failure::Usage(e.into()))?;
     }
+    Ok(m)
+}
+
+fn model(robot_type: u8, params: &[String], json: bool) -> Result<(), Failure> {
+    use worker::nao::model::NaoModel;
+    let m = morphology(robot_type, params)?;
     let model = NaoModel::new(m).map_err(|e| Failure::Usage(e.into()))?;
     let mo = &model.morphology;
     if json {

@@ -29,7 +29,7 @@ pub fn history(dir: &Path, json: bool, csv: bool) -> Result<(), Failure> {
     let best = decided
         .iter()
         .rev()
-        .find_map(|d| d.best.as_ref().map(|b| b.0));
+        .find_map(|d| d.best.as_ref().map(|b| b.iteration));
     let is_best = |d: &DecidedIteration| best == Some(d.iteration);
     if json {
         let rows: Vec<serde_json::Value> = decided

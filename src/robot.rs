@@ -5,14 +5,16 @@ use std::time::Instant;
 
 use anyhow::anyhow;
 use clap::Args;
-use coordinator::evolve::{stats, TrialResult};
+use protocol::pickout::stats;
+use worker::nao::trial::NaoTrial;
 use worker::nao::{
-    model::{Morphology, NaoModel},
+    model::NaoModel,
     sim::{fallen, standing_angles, Sim, SimSettings, Start, CYCLE_S},
     trial,
 };
 
 use crate::cli::{parse_params, Failure};
+use protocol::params::ParamValues;
 
 /// Arguments of `stand`.
 #[derive(Args, Debug)]
@@ -36,11 +38,7 @@ pub fn stand(a: &StandArgs) -> Result<(), Failure> {
     if !(a.seconds.is_finite() && a.seconds > 0.0 && a.seconds <= 3600.0) {
         return Err(Failure::Usage(anyhow!("--seconds must be in (0, 3600]")));
     }
-    let params = parse_params(&a.params)?;
-    let mut m = Morphology::of_type(a.robot_type).map_err(|e| Failure::Usage(e.into()))?;
-    for (name, v) in &params {
-        m.set(name, *v).map_err(|e| Failure::Usage(e.into()))?;
-    }
+    let m = crate::cli::morphology(a.robot_type, &a.params)?;
     let model = NaoModel::new(m).map_err(|e| Failure::Usage(e.into()))?;
     let q = standing_angles(&model);
     let mut sim = Sim::new(&model, SimSettings::default(), &Start::upright(q.clone()))
@@ -157,10 +155,8 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         return Err(Failure::Usage(anyhow!("--duration must be in (0, 600] s")));
     }
     let params = parse_params(&a.params)?;
-    for (name, v) in &params {
-        protocol::params::check_value(name, *v).map_err(|e| Failure::Usage(anyhow!(e)))?;
-    }
-    NaoModel::with_params(a.robot_type, &params).map_err(|e| Failure::Usage(e.into()))?;
+    let values = ParamValues::from_named(&params).map_err(|e| Failure::Usage(e.into()))?;
+    NaoModel::with_params(a.robot_type, &values).map_err(|e| Failure::Usage(e.into()))?;
     if a.threads.is_some_and(|t| t == 0 || t > 1024) {
         return Err(Failure::Usage(anyhow!("--threads must be in 1..=1024")));
     }
@@ -180,12 +176,12 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     })?;
     let settings = SimSettings::with_physics(&physics);
     if let Some(path) = &a.record {
-        record(path, a, &params, settings)?;
+        record(path, a, &params, &values, settings)?;
     }
     let t0 = Instant::now();
     let runs = trial::run_many(
         a.robot_type,
-        &params,
+        &values,
         a.seed,
         a.trials,
         a.duration,
@@ -194,17 +190,7 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     )
     .map_err(|e| Failure::Job(e.into()))?;
     let wall = t0.elapsed().as_secs_f64();
-    let results: Vec<TrialResult> = runs
-        .iter()
-        .map(|t| TrialResult {
-            fell: t.fell,
-            x_m: t.x,
-            y_m: t.y,
-            fall_time_s: t.fall_time_s,
-            sim_time_s: t.sim_time_s,
-            worker: "local".into(),
-        })
-        .collect();
+    let results: Vec<_> = runs.iter().map(|t| t.measurement).collect();
     let s = stats(&results);
     let diverged = runs.iter().filter(|t| t.diverged).count();
     if a.json {
@@ -216,7 +202,7 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             "my": s.my,
             "ex": s.ex,
             "ey": s.ey,
-            "trials": runs,
+            "trials": runs.iter().map(trial_json).collect::<Vec<_>>(),
             "diverged": diverged,
             "wall_s": wall,
         });
@@ -247,6 +233,20 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     Ok(())
 }
 
+/// One trial as `trial --json` lists it.
+fn trial_json(t: &NaoTrial) -> serde_json::Value {
+    let m = &t.measurement;
+    serde_json::json!({
+        "seed": t.seed,
+        "fell": m.fell,
+        "x": m.x_m,
+        "y": m.y_m,
+        "fall_time_s": m.fall_time_s,
+        "diverged": t.diverged,
+        "sim_time_s": m.sim_time_s,
+    })
+}
+
 /// A parameter set as a JSON object of name → value.
 fn params_json(params: &[(String, f64)]) -> serde_json::Map<String, serde_json::Value> {
     params
@@ -262,6 +262,7 @@ fn record(
     path: &std::path::Path,
     a: &TrialArgs,
     params: &[(String, f64)],
+    values: &ParamValues,
     settings: SimSettings,
 ) -> Result<(), Failure> {
     use std::io::Write;
@@ -269,7 +270,7 @@ fn record(
         .map_err(|e| Failure::Usage(anyhow!("--record {}: {e}", path.display())))?;
     let mut out = std::io::BufWriter::new(file);
     let model =
-        NaoModel::with_params(a.robot_type, params).map_err(|e| Failure::Usage(e.into()))?;
+        NaoModel::with_params(a.robot_type, values).map_err(|e| Failure::Usage(e.into()))?;
     let header = serde_json::json!({
         "robot_type": a.robot_type,
         "seed": a.seed,
@@ -280,7 +281,7 @@ fn record(
     let mut io = writeln!(out, "{header}");
     let t = trial::run_observed(
         a.robot_type,
-        params,
+        values,
         a.seed,
         a.duration,
         settings,
@@ -297,8 +298,8 @@ fn record(
     eprintln!(
         "recorded seed {} ({} cycles{}) to {}",
         a.seed,
-        (t.sim_time_s / CYCLE_S).round(),
-        if t.fell { ", fell" } else { "" },
+        (t.measurement.sim_time_s / CYCLE_S).round(),
+        if t.measurement.fell { ", fell" } else { "" },
         path.display()
     );
     Ok(())
@@ -325,7 +326,8 @@ struct Row {
 }
 
 fn measure_stand(settings: SimSettings, seconds: f64) -> Result<Row, Failure> {
-    let model = NaoModel::with_params(0, &[]).map_err(|e| Failure::Job(e.into()))?;
+    let model =
+        NaoModel::with_params(0, &ParamValues::default()).map_err(|e| Failure::Job(e.into()))?;
     let q = standing_angles(&model);
     let t0 = Instant::now();
     let mut sim = Sim::new(&model, settings, &Start::upright(q.clone()))
@@ -348,15 +350,22 @@ fn measure_stand(settings: SimSettings, seconds: f64) -> Result<Row, Failure> {
 
 fn measure_walk(settings: SimSettings, seconds: f64) -> Result<Row, Failure> {
     let t0 = Instant::now();
-    let t = trial::run_observed(0, &[], 1, seconds, settings, &mut |_, _| {})
-        .map_err(|e| Failure::Job(e.into()))?;
+    let t = trial::run_observed(
+        0,
+        &ParamValues::default(),
+        1,
+        seconds,
+        settings,
+        &mut |_, _| {},
+    )
+    .map_err(|e| Failure::Job(e.into()))?;
     Ok(Row {
         label: String::new(),
         motion: "walk",
         settings,
-        sim_s: t.sim_time_s,
+        sim_s: t.measurement.sim_time_s,
         wall_s: t0.elapsed().as_secs_f64(),
-        fell: t.fell,
+        fell: t.measurement.fell,
     })
 }
 

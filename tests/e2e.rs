@@ -516,8 +516,8 @@ n_mcmc = 100
     }
 
     fn outcome_worker(r: &Record) -> Option<String> {
-        if let Record::Outcome { result, .. } = r {
-            Some(result.worker.clone())
+        if let Record::Outcome { worker, .. } = r {
+            Some(worker.clone())
         } else {
             None
         }
@@ -877,7 +877,7 @@ n_mcmc = 100
         assert_every_trial_once(&records, 10);
         let intruder = records
             .iter()
-            .any(|r| matches!(r, Record::Outcome { result, .. } if result.worker == "intruder"));
+            .any(|r| matches!(r, Record::Outcome { worker, .. } if worker == "intruder"));
         assert!(
             !intruder,
             "nothing from the bad messages reached the journal"

@@ -9,146 +9,18 @@
 //! whole run is therefore a pure function of the experiment, its seed and the
 //! set of trial outcomes.
 
+pub use protocol::measurement::Measurement;
+pub use protocol::pickout::{pick_out, stats, HistoryPoint, Incumbent};
 use protocol::{
-    experiment::{Experiment, PickOutConstants, Start},
+    experiment::{Experiment, Start},
     wire::{Best, Decision, Stats},
 };
 use serde::{Deserialize, Serialize};
 
 use crate::clop::{Clop, Dim, Outcome};
 
-/// What one trial returned (the part of a `TrialOutcome` that counts).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct TrialResult {
-    /// Whether the robot fell.
-    pub fell: bool,
-    /// Final torso x (forward), m.
-    pub x_m: f64,
-    /// Final torso y (left), m.
-    pub y_m: f64,
-    /// Time of the fall, s.
-    pub fall_time_s: Option<f64>,
-    /// Simulated time, s.
-    pub sim_time_s: f64,
-    /// Worker that ran it (informative only; never influences decisions).
-    pub worker: String,
-}
-
-impl TrialResult {
-    /// Checks the numbers are finite and consistent.
-    pub fn check(&self) -> Result<(), String> {
-        for (name, v) in [
-            ("x_m", self.x_m),
-            ("y_m", self.y_m),
-            ("sim_time_s", self.sim_time_s),
-        ] {
-            if !v.is_finite() {
-                return Err(format!("{name} is {v}"));
-            }
-        }
-        if self.fall_time_s.is_some_and(|t| !t.is_finite()) {
-            return Err("fall_time_s is not finite".into());
-        }
-        Ok(())
-    }
-}
-
-/// Statistics of an iteration (evolve.md "(ours)": m and e over the successful
-/// trials, my = mean |y|, sample standard deviation; e absent with < 2 successes).
-#[must_use]
-pub fn stats(trials: &[TrialResult]) -> Stats {
-    let ok: Vec<&TrialResult> = trials.iter().filter(|t| !t.fell).collect();
-    let mean = |v: &[f64]| {
-        #[allow(clippy::cast_precision_loss)]
-        let n = v.len() as f64;
-        (!v.is_empty()).then(|| v.iter().sum::<f64>() / n)
-    };
-    let sd = |v: &[f64]| {
-        #[allow(clippy::cast_precision_loss)]
-        let n = v.len() as f64;
-        (v.len() >= 2).then(|| {
-            let m = v.iter().sum::<f64>() / n;
-            (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
-        })
-    };
-    let xs: Vec<f64> = ok.iter().map(|t| t.x_m).collect();
-    let ys: Vec<f64> = ok.iter().map(|t| t.y_m.abs()).collect();
-    let all_x: Vec<f64> = trials.iter().map(|t| t.x_m).collect();
-    let all_y: Vec<f64> = trials.iter().map(|t| t.y_m.abs()).collect();
-    let n = u32::try_from(trials.len()).unwrap_or(u32::MAX);
-    let k = u32::try_from(ok.len()).unwrap_or(u32::MAX);
-    Stats {
-        trials: n,
-        successes: k,
-        s: if n == 0 {
-            0.0
-        } else {
-            f64::from(k) / f64::from(n)
-        },
-        mx: mean(&xs),
-        my: mean(&ys),
-        ex: sd(&xs),
-        ey: sd(&ys),
-        mx_all: mean(&all_x).unwrap_or(0.0),
-        my_all: mean(&all_y).unwrap_or(0.0),
-    }
-}
-
-/// pickOut (Algorithm 2). `best` is ν′ (None while undefined).
-///
-/// Rules of ours: no successful trial or mx ≤ 0 is REJECT; an ex that is
-/// absent (fewer than 2 successes) counts as 0.
-#[must_use]
-pub fn pick_out(nu: &Stats, best: Option<&Stats>, k: &PickOutConstants) -> Decision {
-    let (Some(mx), Some(my)) = (nu.mx, nu.my) else {
-        return Decision::Reject;
-    };
-    if nu.s < k.success_rate {
-        return Decision::Reject; // line 1
-    }
-    if mx <= 0.0 {
-        return Decision::Reject; // (ours)
-    }
-    if my / mx > k.xy_ratio {
-        return Decision::Reject; // line 2
-    }
-    let Some(best) = best else {
-        return Decision::Accept; // line 3
-    };
-    let bmx = best.mx.unwrap_or(0.0);
-    let bex = best.ex.unwrap_or(0.0);
-    let ex = nu.ex.unwrap_or(0.0);
-    if mx < bmx - k.alpha * bex {
-        Decision::Reject // line 4
-    } else if mx < bmx - k.beta * bex {
-        Decision::Equivalent // line 5
-    } else if ex < k.gamma * bex {
-        Decision::Accept // line 6
-    } else if mx < bmx {
-        Decision::Equivalent // line 7
-    } else {
-        Decision::Accept // line 8
-    }
-}
-
-/// SplitMix64 finaliser: the one seed-mixing function of the run.
-#[must_use]
-pub fn mix(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
-}
-
-/// The seed of trial k of iteration i: a function of (run seed, i, k) only.
-#[must_use]
-pub fn trial_seed(run_seed: u64, iteration: u64, trial: u32) -> u64 {
-    mix(mix(mix(run_seed) ^ iteration) ^ (u64::from(trial) | 0x5452_0000_0000_0000))
-}
-
-fn clop_seed(run_seed: u64, iteration: u64) -> u64 {
-    mix(mix(mix(run_seed ^ 0x434c_4f50) ^ iteration))
-}
+use protocol::seed::clop_seed;
+pub use protocol::seed::{mix, trial_seed};
 
 /// An iteration handed out for trials.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -174,17 +46,17 @@ pub struct DecidedIteration {
     pub stats: Stats,
     /// pickOut's decision.
     pub decision: Decision,
-    /// ν′ after the decision: (iteration, params, stats).
-    pub best: Option<(u64, Vec<f64>, Stats)>,
+    /// ν′ after the decision.
+    pub best: Option<Incumbent>,
 }
 
 /// A history imported from an earlier run (`--from RUN_DIR`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 pub struct Imported {
-    /// (p, h) pairs in their order, p in external units.
-    pub history: Vec<(Vec<f64>, Decision)>,
+    /// H's (p, h) pairs in their order, p in external units.
+    pub history: Vec<HistoryPoint>,
     /// The earlier run's ν′.
-    pub best: Option<(u64, Vec<f64>, Stats)>,
+    pub best: Option<Incumbent>,
 }
 
 /// What the driver must do next.
@@ -249,7 +121,7 @@ pub enum Counted {
 struct Pending {
     opened: OpenedIteration,
     internal: Vec<f64>,
-    results: Vec<Option<TrialResult>>,
+    results: Vec<Option<Measurement>>,
 }
 
 /// The evolving loop.
@@ -260,7 +132,7 @@ pub struct Evolve {
     pending: std::collections::BTreeMap<u64, Pending>,
     next_open: u64,
     decided: u64,
-    best: Option<(u64, Vec<f64>, Stats)>,
+    best: Option<Incumbent>,
     history: Vec<DecidedIteration>,
     imported_len: usize,
 }
@@ -279,9 +151,9 @@ impl Evolve {
             })
             .collect();
         let mut clop = Clop::new(dims, exp.clop);
-        for (p, h) in &imported.history {
-            let u = clop.to_internal(p);
-            clop.tell(&u, to_outcome(*h));
+        for h in &imported.history {
+            let u = clop.to_internal(&h.params);
+            clop.tell(&u, to_outcome(h.decision));
         }
         let mut ev = Self {
             exp,
@@ -339,7 +211,7 @@ impl Evolve {
         iteration: u64,
         trial: u32,
         seed: u64,
-        r: &TrialResult,
+        r: &Measurement,
     ) -> Result<Counted, OutcomeError> {
         let p = self
             .pending
@@ -376,7 +248,7 @@ impl Evolve {
         iteration: u64,
         trial: u32,
         seed: u64,
-        r: TrialResult,
+        r: Measurement,
     ) -> Result<Vec<Action>, OutcomeError> {
         if self.classify(iteration, trial, seed, &r)? == Counted::Duplicate {
             return Ok(Vec::new());
@@ -401,11 +273,15 @@ impl Evolve {
             let Some(p) = self.pending.remove(&i) else {
                 break;
             };
-            let results: Vec<TrialResult> = p.results.into_iter().flatten().collect();
+            let results: Vec<Measurement> = p.results.into_iter().flatten().collect();
             let st = stats(&results);
-            let decision = pick_out(&st, self.best.as_ref().map(|b| &b.2), &self.exp.pickout);
+            let decision = pick_out(&st, self.best.as_ref().map(|b| &b.stats), &self.exp.pickout);
             if decision == Decision::Accept {
-                self.best = Some((i, p.opened.params.clone(), st.clone()));
+                self.best = Some(Incumbent {
+                    iteration: i,
+                    params: p.opened.params.clone(),
+                    stats: st.clone(),
+                });
             }
             self.clop.tell(&p.internal, to_outcome(decision));
             self.decided += 1;
@@ -478,7 +354,7 @@ impl Evolve {
 
     /// ν′ (Optim.1): iteration, params, stats.
     #[must_use]
-    pub fn best(&self) -> Option<&(u64, Vec<f64>, Stats)> {
+    pub fn best(&self) -> Option<&Incumbent> {
         self.best.as_ref()
     }
 
@@ -512,7 +388,10 @@ impl Evolve {
             history: self
                 .history
                 .iter()
-                .map(|d| (d.params.clone(), d.decision))
+                .map(|d| HistoryPoint {
+                    params: d.params.clone(),
+                    decision: d.decision,
+                })
                 .collect(),
             best: self.best.clone(),
         }
@@ -521,11 +400,17 @@ impl Evolve {
     /// ν′ in wire form.
     #[must_use]
     pub fn best_wire(&self) -> Option<Best> {
-        self.best.as_ref().map(|(i, p, s)| Best {
-            iteration: *i,
-            params: self.named(p),
-            stats: s.clone(),
-        })
+        self.best.as_ref().map(|b| self.wire_best(b))
+    }
+
+    /// ν′ as watchers see it (parameters by name).
+    #[must_use]
+    pub fn wire_best(&self, b: &Incumbent) -> Best {
+        Best {
+            iteration: b.iteration,
+            params: self.named(&b.params),
+            stats: b.stats.clone(),
+        }
     }
 
     /// Pairs parameter names with values (CLOP order).
@@ -551,147 +436,4 @@ pub fn to_outcome(d: Decision) -> Outcome {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn st(s: f64, mx: Option<f64>, my: f64, ex: Option<f64>) -> Stats {
-        Stats {
-            trials: 10,
-            successes: 10,
-            s,
-            mx,
-            my: mx.map(|_| my),
-            ex,
-            ey: None,
-            mx_all: mx.unwrap_or(0.0),
-            my_all: my,
-        }
-    }
-
-    #[test]
-    fn pick_out_every_line_and_edge() {
-        use Decision::{Accept as A, Equivalent as E, Reject as R};
-        let k = PickOutConstants::default();
-        let best = st(1.0, Some(2.0), 0.1, Some(0.1));
-        let zero_e = st(1.0, Some(2.0), 0.1, Some(0.0));
-        let cases: Vec<(&str, Stats, Option<&Stats>, Decision)> = vec![
-            (
-                "line 1: s below SUCCESS_RATE",
-                st(0.7, Some(3.0), 0.1, Some(0.1)),
-                Some(&best),
-                R,
-            ),
-            (
-                "line 1 edge: s exactly SUCCESS_RATE passes",
-                st(0.75, Some(3.0), 0.1, Some(0.01)),
-                Some(&best),
-                A,
-            ),
-            ("ours: no success", st(0.0, None, 0.0, None), None, R),
-            ("ours: mx <= 0", st(1.0, Some(0.0), 0.0, Some(0.1)), None, R),
-            ("ours: mx < 0", st(1.0, Some(-1.0), 0.0, Some(0.1)), None, R),
-            (
-                "line 2: my/mx above XY_RATIO",
-                st(1.0, Some(1.0), 0.26, Some(0.1)),
-                None,
-                R,
-            ),
-            (
-                "line 2 edge: my/mx exactly XY_RATIO passes",
-                st(1.0, Some(1.0), 0.25, Some(0.1)),
-                None,
-                A,
-            ),
-            (
-                "line 3: no best yet",
-                st(1.0, Some(0.5), 0.1, Some(0.1)),
-                None,
-                A,
-            ),
-            (
-                "line 4: far below",
-                st(1.0, Some(1.69), 0.1, Some(0.1)),
-                Some(&best),
-                R,
-            ),
-            (
-                "line 5: below by more than beta e",
-                st(1.0, Some(1.85), 0.1, Some(0.01)),
-                Some(&best),
-                E,
-            ),
-            (
-                "line 6: within beta e and more precise",
-                st(1.0, Some(1.95), 0.1, Some(0.05)),
-                Some(&best),
-                A,
-            ),
-            (
-                "line 7: within beta e, less precise, below",
-                st(1.0, Some(1.95), 0.1, Some(0.2)),
-                Some(&best),
-                E,
-            ),
-            (
-                "line 8: above, less precise",
-                st(1.0, Some(2.05), 0.1, Some(0.2)),
-                Some(&best),
-                A,
-            ),
-            (
-                "e'x = 0: below is REJECT",
-                st(1.0, Some(1.99), 0.1, Some(0.0)),
-                Some(&zero_e),
-                R,
-            ),
-            (
-                "e'x = 0: equal is ACCEPT",
-                st(1.0, Some(2.0), 0.1, Some(0.0)),
-                Some(&zero_e),
-                A,
-            ),
-            (
-                "e'x = 0: above is ACCEPT",
-                st(1.0, Some(2.1), 0.1, Some(0.3)),
-                Some(&zero_e),
-                A,
-            ),
-        ];
-        for (name, nu, b, want) in cases {
-            assert_eq!(pick_out(&nu, b, &k), want, "{name}");
-        }
-    }
-
-    #[test]
-    fn stats_over_successful_trials() {
-        let t = |fell, x: f64, y: f64| TrialResult {
-            fell,
-            x_m: x,
-            y_m: y,
-            fall_time_s: fell.then_some(1.0),
-            sim_time_s: 10.0,
-            worker: String::new(),
-        };
-        let s = stats(&[
-            t(false, 1.0, -0.2),
-            t(false, 3.0, 0.2),
-            t(true, 0.1, 0.0),
-            t(false, 2.0, 0.2),
-        ]);
-        assert_eq!(s.successes, 3);
-        assert_eq!(s.s, 0.75);
-        assert_eq!(s.mx, Some(2.0));
-        assert!((s.my.unwrap() - 0.2).abs() < 1e-12, "my is the mean of |y|");
-        assert_eq!(s.ex, Some(1.0), "sample sd (n - 1)");
-        assert!((s.mx_all - 1.525).abs() < 1e-12);
-        let one = stats(&[t(false, 1.0, 0.0)]);
-        assert_eq!(one.ex, None);
-    }
-
-    #[test]
-    fn seeds_depend_only_on_run_iteration_trial() {
-        assert_eq!(trial_seed(1, 2, 3), trial_seed(1, 2, 3));
-        assert_ne!(trial_seed(1, 2, 3), trial_seed(1, 3, 2));
-        assert_ne!(trial_seed(1, 2, 3), trial_seed(2, 2, 3));
-    }
-}
+mod tests;

@@ -25,7 +25,7 @@ use std::{
 
 use serde::{Deserialize, Serialize};
 
-use crate::evolve::{DecidedIteration, Imported, OpenedIteration, TrialResult};
+use crate::evolve::{DecidedIteration, Imported, Measurement, OpenedIteration};
 
 /// Name of the journal file inside a run directory.
 pub const JOURNAL_FILE: &str = "journal.nfj";
@@ -64,8 +64,10 @@ pub enum Record {
         trial: u32,
         /// Seed.
         seed: u64,
-        /// The result.
-        result: TrialResult,
+        /// What the trial measured.
+        measurement: Measurement,
+        /// The worker that ran it (informative only; never influences decisions).
+        worker: String,
     },
     /// An iteration was decided.
     Decided(DecidedIteration),

@@ -15,8 +15,8 @@ use protocol::{experiment::text_hash, Experiment, TrialRequest};
 
 use crate::{
     evolve::{
-        Action, Counted, DecidedIteration, Evolve, Imported, OpenedIteration, OutcomeError,
-        TrialResult,
+        Action, Counted, DecidedIteration, Evolve, HistoryPoint, Imported, Incumbent, Measurement,
+        OpenedIteration, OutcomeError,
     },
     journal::{Journal, JournalError, Record, Tail},
     lock::{LockError, RunLock},
@@ -327,9 +327,10 @@ impl Run {
                     iteration,
                     trial,
                     seed,
-                    result,
+                    measurement,
+                    ..
                 } => {
-                    let more = ev.apply(iteration, trial, seed, result).map_err(|e| {
+                    let more = ev.apply(iteration, trial, seed, measurement).map_err(|e| {
                         RunError::Diverged {
                             dir: dirs.clone(),
                             iteration,
@@ -425,18 +426,20 @@ impl Run {
         iteration: u64,
         trial: u32,
         seed: u64,
-        result: TrialResult,
+        measurement: Measurement,
+        worker: &str,
     ) -> Result<(Counted, Vec<Effect>), RunError> {
-        match self.ev.classify(iteration, trial, seed, &result)? {
+        match self.ev.classify(iteration, trial, seed, &measurement)? {
             Counted::Duplicate => Ok((Counted::Duplicate, Vec::new())),
             Counted::New => {
                 self.journal.append(&Record::Outcome {
                     iteration,
                     trial,
                     seed,
-                    result: result.clone(),
+                    measurement,
+                    worker: worker.to_string(),
                 })?;
-                let actions = self.ev.apply(iteration, trial, seed, result)?;
+                let actions = self.ev.apply(iteration, trial, seed, measurement)?;
                 Ok((Counted::New, self.act(actions)?))
             }
         }
@@ -639,7 +642,10 @@ pub fn load_history(dir: &Path, exp: &Experiment) -> Result<FromRun, RunError> {
         match rec {
             Record::Header { imported, .. } => all = imported,
             Record::Decided(d) => {
-                all.history.push((d.params.clone(), d.decision));
+                all.history.push(HistoryPoint {
+                    params: d.params.clone(),
+                    decision: d.decision,
+                });
                 if d.best.is_some() {
                     all.best = d.best;
                 }
@@ -688,12 +694,19 @@ pub fn load_history(dir: &Path, exp: &Experiment) -> Result<FromRun, RunError> {
     let history = all
         .history
         .iter()
-        .filter_map(|(p, d)| remap(p).map(|v| (v, *d)))
+        .filter_map(|h| {
+            remap(&h.params).map(|params| HistoryPoint {
+                params,
+                decision: h.decision,
+            })
+        })
         .collect();
-    let best = all
-        .best
-        .as_ref()
-        .and_then(|(i, p, s)| remap(p).map(|v| (*i, v, s.clone())));
+    let best = all.best.as_ref().and_then(|b| {
+        remap(&b.params).map(|params| Incumbent {
+            params,
+            ..b.clone()
+        })
+    });
     Ok(FromRun {
         best_kept: best.is_some() || all.best.is_none(),
         imported: Imported { history, best },
@@ -741,15 +754,16 @@ pub fn salvage(dir: &Path, out: &Path) -> Result<Salvaged, RunError> {
         });
     }
     let (mut run, _) = Run::open(out, exp, &text, Some(imported))?;
-    let mut pending: Vec<(u64, u32, u64, TrialResult)> = records
+    let mut pending: Vec<(u64, u32, u64, Measurement, String)> = records
         .into_iter()
         .filter_map(|r| match r {
             Record::Outcome {
                 iteration,
                 trial,
                 seed,
-                result,
-            } => Some((iteration, trial, seed, result)),
+                measurement,
+                worker,
+            } => Some((iteration, trial, seed, measurement, worker)),
             _ => None,
         })
         .collect();
@@ -757,12 +771,12 @@ pub fn salvage(dir: &Path, out: &Path) -> Result<Salvaged, RunError> {
     loop {
         let before = pending.len();
         let mut later = Vec::new();
-        for (i, k, seed, r) in pending {
-            match run.on_outcome(i, k, seed, r.clone()) {
+        for (i, k, seed, m, w) in pending {
+            match run.on_outcome(i, k, seed, m, &w) {
                 Ok((Counted::New, _)) => outcomes += 1,
                 Ok((Counted::Duplicate, _)) => {}
                 Err(RunError::Refused(OutcomeError::UnknownIteration(_))) => {
-                    later.push((i, k, seed, r));
+                    later.push((i, k, seed, m, w));
                 }
                 Err(RunError::Refused(_)) => {}
                 Err(e) => return Err(e),
@@ -788,7 +802,7 @@ pub fn salvage(dir: &Path, out: &Path) -> Result<Salvaged, RunError> {
 pub fn drive_local(
     run: &mut Run,
     effects: Vec<Effect>,
-    trial: &dyn Fn(&TrialRequest) -> TrialResult,
+    trial: &dyn Fn(&TrialRequest) -> Measurement,
     order: &mut dyn FnMut(&mut Vec<TrialRequest>),
 ) -> Result<(), RunError> {
     let mut queue: Vec<TrialRequest> = Vec::new();
@@ -806,7 +820,7 @@ pub fn drive_local(
         order(&mut queue);
         let req = queue.remove(0);
         let r = trial(&req);
-        let (_, effects) = run.on_outcome(req.iteration, req.trial, req.seed, r)?;
+        let (_, effects) = run.on_outcome(req.iteration, req.trial, req.seed, r, "local")?;
         push(run, effects, &mut queue);
     }
     Ok(())
@@ -847,16 +861,8 @@ n_mcmc = 200
         Experiment::from_toml(EXP).unwrap()
     }
 
-    fn synthetic(req: &TrialRequest) -> TrialResult {
-        let r = worker::run_trial(req).unwrap();
-        TrialResult {
-            fell: r.fell,
-            x_m: r.x_m,
-            y_m: r.y_m,
-            fall_time_s: r.fall_time_s,
-            sim_time_s: r.sim_time_s,
-            worker: "test".into(),
-        }
+    fn synthetic(req: &TrialRequest) -> Measurement {
+        worker::run_trial(req).unwrap()
     }
 
     fn tmp(name: &str) -> std::path::PathBuf {
@@ -922,26 +928,26 @@ n_mcmc = 200
         };
         let req = run.request(o, 0, 0);
         let r = synthetic(&req);
-        let (c, _) = run.on_outcome(0, 0, req.seed, r.clone()).unwrap();
+        let (c, _) = run.on_outcome(0, 0, req.seed, r, "w").unwrap();
         assert_eq!(c, Counted::New);
-        let (c, _) = run.on_outcome(0, 0, req.seed, r.clone()).unwrap();
+        let (c, _) = run.on_outcome(0, 0, req.seed, r, "w").unwrap();
         assert_eq!(c, Counted::Duplicate);
-        let mut nan = r.clone();
+        let mut nan = r;
         nan.x_m = f64::NAN;
         assert!(matches!(
-            run.on_outcome(0, 1, run.request(o, 1, 0).seed, nan),
+            run.on_outcome(0, 1, run.request(o, 1, 0).seed, nan, "w"),
             Err(RunError::Refused(_))
         ));
         assert!(matches!(
-            run.on_outcome(99, 0, 0, r.clone()),
+            run.on_outcome(99, 0, 0, r, "w"),
             Err(RunError::Refused(OutcomeError::UnknownIteration(99)))
         ));
         assert!(matches!(
-            run.on_outcome(0, 77, 0, r.clone()),
+            run.on_outcome(0, 77, 0, r, "w"),
             Err(RunError::Refused(OutcomeError::UnknownTrial { .. }))
         ));
         assert!(matches!(
-            run.on_outcome(0, 1, 12345, r),
+            run.on_outcome(0, 1, 12345, r, "w"),
             Err(RunError::Refused(OutcomeError::WrongSeed { .. }))
         ));
         drop(run);
@@ -973,7 +979,7 @@ n_mcmc = 200
             for _ in 0..stop_after {
                 let req = queue.remove(0);
                 let (_, effects) = run
-                    .on_outcome(req.iteration, req.trial, req.seed, synthetic(&req))
+                    .on_outcome(req.iteration, req.trial, req.seed, synthetic(&req), "w")
                     .unwrap();
                 enqueue(&run, effects, &mut queue);
             }
@@ -1035,9 +1041,21 @@ n_mcmc = 200
             last > first,
             "ACCEPT+EQUIVALENT share must grow: {first}/50 in the first quarter, {last}/50 in the last"
         );
-        // The synthetic optimum (worker::synthetic::SHAPE; the step length's
-        // best lies where speed saturates before the balance penalty, ~0.125 m).
-        let optimum = [-0.038, 0.80, 0.014, 0.038, 0.125];
+        // The synthetic optimum, read from the model itself, in the experiment's order.
+        let optimum: Vec<f64> = ev
+            .experiment()
+            .parameter
+            .iter()
+            .map(|p| {
+                let id = protocol::params::find(&p.name)
+                    .expect("a known parameter")
+                    .param;
+                worker::synthetic::SHAPE
+                    .iter()
+                    .find(|(q, _, _)| *q == id)
+                    .map_or(worker::synthetic::STEP_OPTIMUM, |(_, o, _)| *o)
+            })
+            .collect();
         let ranges = [0.05, 0.35, 0.029, 0.045, 0.13];
         let off = |p: &[f64]| -> f64 {
             p.iter()
@@ -1047,7 +1065,7 @@ n_mcmc = 200
                 .sqrt()
         };
         let expert = off(&h[0].params);
-        let (_, nu_p, _) = ev.best().expect("a best exists");
+        let nu_p = &ev.best().expect("a best exists").params;
         let optim1 = off(nu_p);
         let optim2 = off(&ev.optim2());
         eprintln!(

@@ -20,7 +20,7 @@ use protocol::{
 use zenoh::{bytes::Encoding, sample::SampleKind, Session};
 
 use crate::{
-    evolve::{DecidedIteration, OpenedIteration, TrialResult},
+    evolve::{DecidedIteration, OpenedIteration},
     run::{Effect, FailureVerdict, Run, RunError},
 };
 
@@ -177,11 +177,7 @@ impl State {
             params: ev.named(&d.params),
             stats: d.stats.clone(),
             decision: d.decision,
-            best: d.best.as_ref().map(|(i, p, s)| protocol::wire::Best {
-                iteration: *i,
-                params: ev.named(p),
-                stats: s.clone(),
-            }),
+            best: d.best.as_ref().map(|b| ev.wire_best(b)),
         }
     }
 
@@ -455,15 +451,11 @@ async fn on_outcome(
     if st.inflight.get(&t).is_some_and(|f| f.worker == o.worker) {
         st.inflight.remove(&t);
     }
-    let result = TrialResult {
-        fell: o.fell,
-        x_m: o.x_m,
-        y_m: o.y_m,
-        fall_time_s: o.fall_time_s,
-        sim_time_s: o.sim_time_s,
-        worker: o.worker.clone(),
-    };
-    match st.run.on_outcome(o.iteration, o.trial, o.seed, result) {
+
+    match st
+        .run
+        .on_outcome(o.iteration, o.trial, o.seed, o.measurement(), &o.worker)
+    {
         Ok((crate::evolve::Counted::Duplicate, _)) => {
             st.counters.duplicates += 1;
             tracing::debug!(

@@ -13,7 +13,10 @@
 
 pub mod experiment;
 pub mod keys;
+pub mod measurement;
 pub mod params;
+pub mod pickout;
+pub mod seed;
 pub mod wire;
 
 pub use experiment::{Experiment, ExperimentError, ParamKind, ParamSpec, Physics, TrialModel};

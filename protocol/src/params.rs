@@ -1,15 +1,70 @@
-//! The registry of parameter names an experiment may optimise.
+//! The one registry of the robot's parameters: each name an experiment may
+//! optimise or fix, its role (morphology or walk), unit, admissible range,
+//! expert value and meaning.
 //!
 //! Every name a worker understands is listed here with the range a worker can
 //! build and run (the *admissible* range). An experiment's bounds must lie
 //! inside it; anything else is refused when the file is read, long before a
-//! worker sees it.
+//! worker sees it. Named values are decoded once, by [`ParamValues::from_named`],
+//! into values addressed by [`Param`]; the NAO model, the walk and the
+//! synthetic model read those, never a name. Must not: spell a parameter's
+//! name anywhere but in [`KNOWN`].
+
+/// Which part of the robot a parameter shapes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Role {
+    /// A body dimension (the league's heterogeneous-type quantities).
+    Morphology,
+    /// A setting of the walk.
+    Walk,
+}
+
+/// A known parameter, by identity (the order of [`KNOWN`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Param {
+    /// `ThighRelHip2_Z`.
+    ThighRelHip2Z,
+    /// `ratio_flexion`.
+    RatioFlexion,
+    /// `long_offset_MidAnkles_2_Torso_Init`.
+    LongOffset,
+    /// `height_lift`.
+    HeightLift,
+    /// `xlength_step_max`.
+    StepLength,
+    /// `Hip1RelTorso_X`.
+    Hip1RelTorsoX,
+    /// `Hip1RelTorso_Z`.
+    Hip1RelTorsoZ,
+    /// `AnkleRelShank_Z`.
+    AnkleRelShankZ,
+    /// `ElbowRelUpperArm_Y`.
+    ElbowRelUpperArmY,
+}
+
+impl Param {
+    /// Its registry entry.
+    #[must_use]
+    pub const fn spec(self) -> &'static KnownParam {
+        &KNOWN[self as usize]
+    }
+
+    /// Its name, as in the paper and the experiment files.
+    #[must_use]
+    pub const fn name(self) -> &'static str {
+        self.spec().name
+    }
+}
 
 /// One parameter the trial models understand.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct KnownParam {
+    /// Its identity.
+    pub param: Param,
     /// Identifier exactly as in the paper and the experiment files.
     pub name: &'static str,
+    /// Morphology or walk.
+    pub role: Role,
     /// Smallest admissible value (external units).
     pub min: f64,
     /// Largest admissible value (external units).
@@ -25,7 +80,9 @@ pub struct KnownParam {
 /// Every parameter naofarm's trial models accept.
 pub const KNOWN: &[KnownParam] = &[
     KnownParam {
+        param: Param::ThighRelHip2Z,
         name: "ThighRelHip2_Z",
+        role: Role::Morphology,
         min: -0.12,
         max: -0.005,
         unit: "m",
@@ -33,7 +90,9 @@ pub const KNOWN: &[KnownParam] = &[
         doc: "thigh centre below the hip; thigh length = 0.08 - value",
     },
     KnownParam {
+        param: Param::RatioFlexion,
         name: "ratio_flexion",
+        role: Role::Walk,
         min: 0.40,
         max: 0.99,
         unit: "1",
@@ -41,7 +100,9 @@ pub const KNOWN: &[KnownParam] = &[
         doc: "walking hip height over stretched leg length",
     },
     KnownParam {
+        param: Param::LongOffset,
         name: "long_offset_MidAnkles_2_Torso_Init",
+        role: Role::Walk,
         min: -0.05,
         max: 0.06,
         unit: "m",
@@ -49,7 +110,9 @@ pub const KNOWN: &[KnownParam] = &[
         doc: "forward offset of the torso over the mid-ankles",
     },
     KnownParam {
+        param: Param::HeightLift,
         name: "height_lift",
+        role: Role::Walk,
         min: 0.0,
         max: 0.12,
         unit: "m",
@@ -57,7 +120,9 @@ pub const KNOWN: &[KnownParam] = &[
         doc: "maximal swing-foot lift",
     },
     KnownParam {
+        param: Param::StepLength,
         name: "xlength_step_max",
+        role: Role::Walk,
         min: 0.0,
         max: 0.25,
         unit: "m",
@@ -65,7 +130,9 @@ pub const KNOWN: &[KnownParam] = &[
         doc: "step length (the first two steps are half as long)",
     },
     KnownParam {
+        param: Param::Hip1RelTorsoX,
         name: "Hip1RelTorso_X",
+        role: Role::Morphology,
         min: 0.04,
         max: 0.09,
         unit: "m",
@@ -73,7 +140,9 @@ pub const KNOWN: &[KnownParam] = &[
         doc: "lateral hip offset from the torso centre",
     },
     KnownParam {
+        param: Param::Hip1RelTorsoZ,
         name: "Hip1RelTorso_Z",
+        role: Role::Morphology,
         min: -0.14,
         max: -0.09,
         unit: "m",
@@ -81,7 +150,9 @@ pub const KNOWN: &[KnownParam] = &[
         doc: "hip height below the torso centre",
     },
     KnownParam {
+        param: Param::AnkleRelShankZ,
         name: "AnkleRelShank_Z",
+        role: Role::Morphology,
         min: -0.11,
         max: -0.03,
         unit: "m",
@@ -89,7 +160,9 @@ pub const KNOWN: &[KnownParam] = &[
         doc: "ankle below the shank centre; tibia length = 0.045 - value",
     },
     KnownParam {
+        param: Param::ElbowRelUpperArmY,
         name: "ElbowRelUpperArm_Y",
+        role: Role::Morphology,
         min: 0.04,
         max: 0.15,
         unit: "m",
@@ -104,28 +177,143 @@ pub fn find(name: &str) -> Option<&'static KnownParam> {
     KNOWN.iter().find(|p| p.name == name)
 }
 
+/// Why a named value was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ParamError {
+    /// Not a known name.
+    #[error("unknown parameter `{0}` (known: {known})", known = KNOWN.iter().map(|p| p.name).collect::<Vec<_>>().join(", "))]
+    Unknown(String),
+    /// NaN or infinite.
+    #[error("parameter `{name}` is {value}, not a finite number")]
+    NotFinite {
+        /// The parameter.
+        name: &'static str,
+        /// The value.
+        value: f64,
+    },
+    /// Outside the admissible range.
+    #[error("parameter `{name}` = {value} is outside its admissible range [{min}, {max}] {unit}")]
+    Range {
+        /// The parameter.
+        name: &'static str,
+        /// The value.
+        value: f64,
+        /// Lower bound.
+        min: f64,
+        /// Upper bound.
+        max: f64,
+        /// Unit.
+        unit: &'static str,
+    },
+}
+
+/// Checks one value against its parameter's admissible range.
+pub fn check(p: Param, value: f64) -> Result<(), ParamError> {
+    let s = p.spec();
+    if !value.is_finite() {
+        return Err(ParamError::NotFinite {
+            name: s.name,
+            value,
+        });
+    }
+    if value < s.min || value > s.max {
+        return Err(ParamError::Range {
+            name: s.name,
+            value,
+            min: s.min,
+            max: s.max,
+            unit: s.unit,
+        });
+    }
+    Ok(())
+}
+
 /// Checks one value against the admissible range of its parameter.
 ///
 /// Returns a message naming the parameter and its range on failure.
 pub fn check_value(name: &str, value: f64) -> Result<(), String> {
-    let Some(p) = find(name) else {
-        return Err(format!(
-            "unknown parameter `{name}` (known: {})",
-            KNOWN.iter().map(|p| p.name).collect::<Vec<_>>().join(", ")
-        ));
+    let p = find(name).ok_or_else(|| ParamError::Unknown(name.to_string()).to_string())?;
+    check(p.param, value).map_err(|e| e.to_string())
+}
+
+/// The walk's parameters (experiment 2's L minus the morphology).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WalkParams {
+    /// `ratio_flexion`.
+    pub ratio_flexion: f64,
+    /// `long_offset_MidAnkles_2_Torso_Init`, m.
+    pub long_offset: f64,
+    /// `height_lift`, m.
+    pub height_lift: f64,
+    /// `xlength_step_max`, m.
+    pub step_length: f64,
+}
+
+impl WalkParams {
+    /// The paper's expert values (the registry's defaults).
+    pub const EXPERT: Self = Self {
+        ratio_flexion: Param::RatioFlexion.spec().default,
+        long_offset: Param::LongOffset.spec().default,
+        height_lift: Param::HeightLift.spec().default,
+        step_length: Param::StepLength.spec().default,
     };
-    if !value.is_finite() {
-        return Err(format!(
-            "parameter `{name}` is {value}, not a finite number"
-        ));
+}
+
+/// A parameter set decoded once from names: each known parameter's value, if given.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ParamValues {
+    given: [Option<f64>; KNOWN.len()],
+}
+
+impl ParamValues {
+    /// Decodes named values (unknown names, non-finite or out-of-range values are errors).
+    pub fn from_named(params: &[(String, f64)]) -> Result<Self, ParamError> {
+        let mut out = Self::default();
+        for (name, value) in params {
+            let p = find(name).ok_or_else(|| ParamError::Unknown(name.clone()))?;
+            out.set(p.param, *value)?;
+        }
+        Ok(out)
     }
-    if value < p.min || value > p.max {
-        return Err(format!(
-            "parameter `{name}` = {value} is outside its admissible range [{}, {}] {}",
-            p.min, p.max, p.unit
-        ));
+
+    /// Sets one value (checked against its range).
+    pub fn set(&mut self, p: Param, value: f64) -> Result<(), ParamError> {
+        check(p, value)?;
+        self.given[p as usize] = Some(value);
+        Ok(())
     }
-    Ok(())
+
+    /// The value given for `p`, if any.
+    #[must_use]
+    pub fn given(&self, p: Param) -> Option<f64> {
+        self.given[p as usize]
+    }
+
+    /// The value of `p`: given, or the registry's default.
+    #[must_use]
+    pub fn value(&self, p: Param) -> f64 {
+        self.given(p).unwrap_or(p.spec().default)
+    }
+
+    /// The walk's parameters (unset ones at expert).
+    #[must_use]
+    pub fn walk(&self) -> WalkParams {
+        WalkParams {
+            ratio_flexion: self.value(Param::RatioFlexion),
+            long_offset: self.value(Param::LongOffset),
+            height_lift: self.value(Param::HeightLift),
+            step_length: self.value(Param::StepLength),
+        }
+    }
+
+    /// The given values, by name, in registry order.
+    #[must_use]
+    pub fn named(&self) -> Vec<(String, f64)> {
+        KNOWN
+            .iter()
+            .filter_map(|k| self.given(k.param).map(|v| (k.name.to_string(), v)))
+            .collect()
+    }
 }
 
 #[cfg(test)]
@@ -141,6 +329,19 @@ mod tests {
             assert!(p.min < p.max, "{}", p.name);
             assert!(check_value(p.name, p.default).is_ok(), "{}", p.name);
         }
+    }
+
+    #[test]
+    fn the_registry_is_in_identity_order() {
+        for (i, k) in KNOWN.iter().enumerate() {
+            assert_eq!(k.param as usize, i, "{}", k.name);
+        }
+        let v = ParamValues::from_named(&[("height_lift".into(), 0.05)]).unwrap();
+        assert_eq!(v.walk().height_lift, 0.05);
+        assert_eq!(v.walk().step_length, WalkParams::EXPERT.step_length);
+        assert_eq!(v.given(Param::ThighRelHip2Z), None);
+        assert!(ParamValues::from_named(&[("nope".into(), 0.0)]).is_err());
+        assert!(ParamValues::from_named(&[("height_lift".into(), 0.5)]).is_err());
     }
 
     #[test]

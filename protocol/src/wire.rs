@@ -9,7 +9,10 @@
 
 use serde::{de::DeserializeOwned, Deserialize, Serialize};
 
-use crate::experiment::{Physics, TrialModel};
+use crate::{
+    experiment::{Physics, TrialModel},
+    measurement::Measurement,
+};
 
 /// Version of the envelope and message layout.
 pub const WIRE_VERSION: u8 = 1;
@@ -276,6 +279,39 @@ pub struct TrialOutcome {
     pub sim_time_s: f64,
     /// Wall-clock time the trial took on the worker, s.
     pub wall_time_s: f64,
+}
+
+impl TrialOutcome {
+    /// The answer to `req`: what `worker` measured, in `wall_time_s` of wall time.
+    #[must_use]
+    pub fn answer(req: &TrialRequest, worker: String, m: Measurement, wall_time_s: f64) -> Self {
+        Self {
+            run: req.run.clone(),
+            iteration: req.iteration,
+            trial: req.trial,
+            seed: req.seed,
+            dispatch: req.dispatch,
+            worker,
+            fell: m.fell,
+            x_m: m.x_m,
+            y_m: m.y_m,
+            fall_time_s: m.fall_time_s,
+            sim_time_s: m.sim_time_s,
+            wall_time_s,
+        }
+    }
+
+    /// What the trial measured.
+    #[must_use]
+    pub fn measurement(&self) -> Measurement {
+        Measurement {
+            fell: self.fell,
+            x_m: self.x_m,
+            y_m: self.y_m,
+            fall_time_s: self.fall_time_s,
+            sim_time_s: self.sim_time_s,
+        }
+    }
 }
 
 impl WireMessage for TrialOutcome {

@@ -6,7 +6,7 @@
 
 use protocol::TrialRequest;
 
-use crate::{TrialError, TrialRun};
+use crate::{Measurement, TrialError};
 
 /// The environment variable that switches a fault on.
 pub const TRIAL_FAULT_VAR: &str = "NAOFARM_FAULT_TRIAL";
@@ -40,7 +40,7 @@ fn fault_for(req: &TrialRequest) -> Option<Mode> {
 }
 
 /// Runs one trial, unless a fault hook says otherwise.
-pub fn run_trial(req: &TrialRequest) -> Result<TrialRun, TrialError> {
+pub fn run_trial(req: &TrialRequest) -> Result<Measurement, TrialError> {
     match fault_for(req) {
         None => crate::run_trial(req),
         Some(Mode::Fail) => Err(TrialError::Model(format!(

@@ -2,7 +2,8 @@
 //!
 //! Modules: [`nao`] (the league's NAO in rapier3d, its walk and trials),
 //! [`synthetic`] (a cheap stand-in model for tests and farm benchmarks),
-//! [`service`] (the zenoh worker), [`fault`] (run-time fault hooks for tests).
+//! [`service`] (the zenoh worker), [`fault`] (run-time fault hooks for tests),
+//! [`noise`] (the seeded noise both models draw from).
 //! [`run_trial`] is the one trial interface, a pure function of the request.
 //!
 //! This crate must not keep state between trials or decide anything about
@@ -11,44 +12,13 @@
 
 pub mod fault;
 pub mod nao;
+pub mod noise;
 pub mod service;
 pub mod synthetic;
 
 use protocol::{TrialModel, TrialRequest};
 
-/// What one trial produced, before the worker adds its identity.
-#[derive(Debug, Clone, PartialEq)]
-pub struct TrialRun {
-    /// Whether the robot fell.
-    pub fell: bool,
-    /// Final torso x (forward), m.
-    pub x_m: f64,
-    /// Final torso y (left), m.
-    pub y_m: f64,
-    /// Simulated time of the fall, s.
-    pub fall_time_s: Option<f64>,
-    /// Simulated time run, s.
-    pub sim_time_s: f64,
-}
-
-impl TrialRun {
-    /// Checks every number is finite and the fall is consistent.
-    pub fn check(&self) -> Result<(), String> {
-        for (name, v) in [
-            ("x_m", self.x_m),
-            ("y_m", self.y_m),
-            ("sim_time_s", self.sim_time_s),
-        ] {
-            if !v.is_finite() {
-                return Err(format!("non-finite result: {name} = {v}"));
-            }
-        }
-        match self.fall_time_s {
-            Some(t) if !t.is_finite() => Err(format!("non-finite result: fall_time_s = {t}")),
-            _ => Ok(()),
-        }
-    }
-}
+pub use protocol::measurement::Measurement;
 
 /// Why a trial could not run.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -59,25 +29,21 @@ pub enum TrialError {
 }
 
 /// Runs one trial: a pure function of the request.
-pub fn run_trial(req: &TrialRequest) -> Result<TrialRun, TrialError> {
+pub fn run_trial(req: &TrialRequest) -> Result<Measurement, TrialError> {
+    let params = protocol::params::ParamValues::from_named(&req.params)
+        .map_err(|e| TrialError::Model(e.to_string()))?;
     match req.model {
-        TrialModel::Synthetic => Ok(synthetic::trial(&req.params, req.seed, req.duration_s)),
+        TrialModel::Synthetic => Ok(synthetic::trial(&params, req.seed, req.duration_s)),
         TrialModel::Nao => {
             let t = nao::trial::run(
                 req.robot_type,
-                &req.params,
+                &params,
                 req.seed,
                 req.duration_s,
                 nao::sim::SimSettings::with_physics(&req.physics),
             )
             .map_err(|e| TrialError::Model(e.to_string()))?;
-            Ok(TrialRun {
-                fell: t.fell,
-                x_m: t.x,
-                y_m: t.y,
-                fall_time_s: t.fall_time_s,
-                sim_time_s: t.sim_time_s,
-            })
+            Ok(t.measurement)
         }
     }
 }

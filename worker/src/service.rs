@@ -129,8 +129,7 @@ pub async fn serve(
                 busy.fetch_add(1, Ordering::Relaxed);
                 tasks.spawn(async move {
                     let started = Instant::now();
-                    let (run, iteration, trial, seed, dispatch) =
-                        (req.run.clone(), req.iteration, req.trial, req.seed, req.dispatch);
+                    let asked = req.clone();
                     let r = tokio::task::spawn_blocking(move || {
                         let out = crate::fault::run_trial(&req);
                         let rest = min_trial.saturating_sub(started.elapsed());
@@ -149,29 +148,24 @@ pub async fn serve(
                         Err(e) => Err(format!("the trial's thread ended: {e}")),
                     };
                     match result {
-                        Ok(t) => {
-                            let o = TrialOutcome {
-                                run,
-                                iteration,
-                                trial,
-                                seed,
-                                dispatch,
-                                worker: id,
-                                fell: t.fell,
-                                x_m: t.x_m,
-                                y_m: t.y_m,
-                                fall_time_s: t.fall_time_s,
-                                sim_time_s: t.sim_time_s,
-                                wall_time_s: started.elapsed().as_secs_f64(),
-                            };
+                        Ok(m) => {
+                            let o = TrialOutcome::answer(&asked, id, m, started.elapsed().as_secs_f64());
                             if let Err(e) = session.put(keys::outcomes(&prefix), o.encode()).await {
                                 tracing::warn!(error = %e, "publishing an outcome failed");
                             }
                             true
                         }
                         Err(reason) => {
-                            tracing::error!(%reason, iteration, trial, "trial could not run; reporting it");
-                            let f = TrialFailure { run, iteration, trial, seed, dispatch, worker: id, reason };
+                            tracing::error!(%reason, iteration = asked.iteration, trial = asked.trial, "trial could not run; reporting it");
+                            let f = TrialFailure {
+                                run: asked.run,
+                                iteration: asked.iteration,
+                                trial: asked.trial,
+                                seed: asked.seed,
+                                dispatch: asked.dispatch,
+                                worker: id,
+                                reason,
+                            };
                             if let Err(e) = session.put(keys::failures(&prefix), f.encode()).await {
                                 tracing::warn!(error = %e, "publishing a failure failed");
                             }

@@ -6,44 +6,35 @@
 //! of p with an optimum inside the paper's space L; all noise comes from the
 //! trial's seed. It must never be mistaken for the robot: it exists for tests.
 
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+use protocol::params::{Param, ParamValues};
+use rand::Rng;
 
-use crate::TrialRun;
+use crate::{
+    noise::{gauss, stream},
+    Measurement,
+};
 
-/// (name, optimum, width): the penalty is Σ ((v − optimum) / width)².
-const SHAPE: &[(&str, f64, f64)] = &[
-    ("ThighRelHip2_Z", -0.038, 0.03),
-    ("ratio_flexion", 0.80, 0.12),
-    ("long_offset_MidAnkles_2_Torso_Init", 0.014, 0.02),
-    ("height_lift", 0.038, 0.03),
+/// (parameter, optimum, width): the penalty is Σ ((v − optimum) / width)².
+pub const SHAPE: &[(Param, f64, f64)] = &[
+    (Param::ThighRelHip2Z, -0.038, 0.03),
+    (Param::RatioFlexion, 0.80, 0.12),
+    (Param::LongOffset, 0.014, 0.02),
+    (Param::HeightLift, 0.038, 0.03),
 ];
 
-fn value(params: &[(String, f64)], name: &str) -> f64 {
-    params
-        .iter()
-        .find(|(n, _)| n == name)
-        .map(|(_, v)| *v)
-        .or_else(|| protocol::params::find(name).map(|p| p.default))
-        .unwrap_or(0.0)
-}
-
-pub(crate) fn gauss(rng: &mut ChaCha8Rng) -> f64 {
-    // Box–Muller; one value per call keeps the stream simple.
-    let u1: f64 = rng.random_range(f64::EPSILON..1.0);
-    let u2: f64 = rng.random();
-    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
-}
+/// The step length where speed saturates just before the balance penalty
+/// (the best `xlength_step_max` when the rest of [`SHAPE`] is at its optimum), m.
+pub const STEP_OPTIMUM: f64 = 0.125;
 
 /// Runs one synthetic trial of `duration_s` simulated seconds.
 #[must_use]
-pub fn trial(params: &[(String, f64)], seed: u64, duration_s: f64) -> TrialRun {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+pub fn trial(params: &ParamValues, seed: u64, duration_s: f64) -> Measurement {
+    let mut rng = stream(seed);
     let penalty: f64 = SHAPE
         .iter()
-        .map(|(n, c, w)| ((value(params, n) - c) / w).powi(2))
+        .map(|(p, c, w)| ((params.value(*p) - c) / w).powi(2))
         .sum();
-    let step = value(params, "xlength_step_max");
+    let step = params.value(Param::StepLength);
     // Speed grows with the step length and saturates; too long a step hurts balance.
     let speed = 0.6 * (step / 0.12).min(1.2) * (-0.5 * penalty).exp();
     let step_risk = ((step - 0.12) / 0.03).max(0.0).powi(2);
@@ -54,7 +45,7 @@ pub fn trial(params: &[(String, f64)], seed: u64, duration_s: f64) -> TrialRun {
     let fall: f64 = rng.random();
     if fall < p_fall {
         let t = duration_s * rng.random_range(0.05..1.0);
-        TrialRun {
+        Measurement {
             fell: true,
             x_m: x * t / duration_s,
             y_m: y * t / duration_s,
@@ -62,7 +53,7 @@ pub fn trial(params: &[(String, f64)], seed: u64, duration_s: f64) -> TrialRun {
             sim_time_s: t,
         }
     } else {
-        TrialRun {
+        Measurement {
             fell: false,
             x_m: x,
             y_m: y,
@@ -76,11 +67,11 @@ pub fn trial(params: &[(String, f64)], seed: u64, duration_s: f64) -> TrialRun {
 mod tests {
     use super::*;
 
-    fn p(thigh: f64, step: f64) -> Vec<(String, f64)> {
-        vec![
-            ("ThighRelHip2_Z".into(), thigh),
-            ("xlength_step_max".into(), step),
-        ]
+    fn p(thigh: f64, step: f64) -> ParamValues {
+        let mut v = ParamValues::default();
+        v.set(Param::ThighRelHip2Z, thigh).unwrap();
+        v.set(Param::StepLength, step).unwrap();
+        v
     }
 
     #[test]
@@ -94,8 +85,8 @@ mod tests {
     #[test]
     fn optimum_inside_the_space_and_falls_near_the_edges() {
         let run = |thigh, step| {
-            let rs: Vec<TrialRun> = (0..200).map(|s| trial(&p(thigh, step), s, 10.0)).collect();
-            let ok: Vec<&TrialRun> = rs.iter().filter(|r| !r.fell).collect();
+            let rs: Vec<Measurement> = (0..200).map(|s| trial(&p(thigh, step), s, 10.0)).collect();
+            let ok: Vec<&Measurement> = rs.iter().filter(|r| !r.fell).collect();
             #[allow(clippy::cast_precision_loss)]
             let s = ok.len() as f64 / 200.0;
             #[allow(clippy::cast_precision_loss)]

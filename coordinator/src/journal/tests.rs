@@ -20,14 +20,14 @@ fn outcome(i: u64) -> Record {
         iteration: i,
         trial: 0,
         seed: 9,
-        result: TrialResult {
+        measurement: Measurement {
             fell: false,
             x_m: 1.0 + i as f64,
             y_m: 0.0,
             fall_time_s: None,
             sim_time_s: 10.0,
-            worker: "w".into(),
         },
+        worker: "w".into(),
     }
 }
 

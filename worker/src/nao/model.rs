@@ -7,6 +7,7 @@
 //! (a proper rotation, so hinge signs keep their meaning). Everything is given
 //! at the zero pose, relative to the torso centre.
 
+use protocol::params::{Param, ParamValues, Role, KNOWN};
 use serde::Serialize;
 
 /// A body's collision/inertia shape (sizes in metres, our frame).
@@ -97,17 +98,14 @@ pub const MAX_SPEED: f64 = 6.1395;
 /// Type 4's toe length, m.
 pub const TOE_LENGTH: f64 = 0.035_517_656;
 
-/// Admissible ranges of the morphology quantities (name, lower, upper), m.
-///
-/// ThighRelHip2_Z accepts at least the paper's [−0.10, −0.01]; beyond the
-/// range the thigh would pass through the hip or the shank.
-pub const RANGES: &[(&str, f64, f64)] = &[
-    ("ThighRelHip2_Z", -0.12, -0.005),
-    ("Hip1RelTorso_X", 0.04, 0.09),
-    ("Hip1RelTorso_Z", -0.14, -0.09),
-    ("AnkleRelShank_Z", -0.11, -0.03),
-    ("ElbowRelUpperArm_Y", 0.04, 0.15),
-];
+fn morphology_names() -> String {
+    KNOWN
+        .iter()
+        .filter(|k| k.role == Role::Morphology)
+        .map(|k| k.name)
+        .collect::<Vec<_>>()
+        .join(", ")
+}
 
 /// Why a model was refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -127,8 +125,8 @@ pub enum ModelError {
         /// Upper bound.
         hi: f64,
     },
-    /// A parameter the model does not know.
-    #[error("unknown morphology parameter `{0}` (known: ThighRelHip2_Z, Hip1RelTorso_X, Hip1RelTorso_Z, AnkleRelShank_Z, ElbowRelUpperArm_Y)")]
+    /// A parameter that is not a morphology quantity.
+    #[error("`{0}` is not a morphology parameter (those are: {known})", known = morphology_names())]
     Unknown(String),
     /// The structure is inconsistent (names, parents, ranges).
     #[error("invalid model: {0}")]
@@ -177,41 +175,48 @@ impl Morphology {
         })
     }
 
-    /// Sets one morphology quantity by its spec name (checked by [`Morphology::validate`]).
-    pub fn set(&mut self, name: &str, value: f64) -> Result<(), ModelError> {
-        match name {
-            "ThighRelHip2_Z" => self.thigh_rel_hip2_z = value,
-            "Hip1RelTorso_X" => self.hip1_rel_torso_x = value,
-            "Hip1RelTorso_Z" => self.hip1_rel_torso_z = value,
-            "AnkleRelShank_Z" => self.ankle_rel_shank_z = value,
-            "ElbowRelUpperArm_Y" => self.elbow_rel_upper_arm_y = value,
-            other => return Err(ModelError::Unknown(other.to_string())),
+    /// The field holding morphology parameter `p` (None for a walk parameter).
+    fn field_mut(&mut self, p: Param) -> Option<&mut f64> {
+        match p {
+            Param::ThighRelHip2Z => Some(&mut self.thigh_rel_hip2_z),
+            Param::Hip1RelTorsoX => Some(&mut self.hip1_rel_torso_x),
+            Param::Hip1RelTorsoZ => Some(&mut self.hip1_rel_torso_z),
+            Param::AnkleRelShankZ => Some(&mut self.ankle_rel_shank_z),
+            Param::ElbowRelUpperArmY => Some(&mut self.elbow_rel_upper_arm_y),
+            Param::RatioFlexion | Param::LongOffset | Param::HeightLift | Param::StepLength => None,
+        }
+    }
+
+    /// Sets one morphology quantity (checked by [`Morphology::validate`]).
+    pub fn set(&mut self, p: Param, value: f64) -> Result<(), ModelError> {
+        let f = self
+            .field_mut(p)
+            .ok_or_else(|| ModelError::Unknown(p.name().to_string()))?;
+        *f = value;
+        self.validate()
+    }
+
+    /// Applies every morphology value given in a decoded set (walk values are not its concern).
+    pub fn apply(&mut self, values: &ParamValues) -> Result<(), ModelError> {
+        for k in KNOWN.iter().filter(|k| k.role == Role::Morphology) {
+            if let (Some(v), Some(f)) = (values.given(k.param), self.field_mut(k.param)) {
+                *f = v;
+            }
         }
         self.validate()
     }
 
-    /// Whether `name` is a morphology quantity.
-    #[must_use]
-    pub fn is_morphology(name: &str) -> bool {
-        RANGES.iter().any(|(n, _, _)| *n == name)
-    }
-
-    /// Checks every quantity against [`RANGES`].
+    /// Checks every quantity against the registry's admissible range.
     pub fn validate(&self) -> Result<(), ModelError> {
-        for (name, lo, hi) in RANGES {
-            let value = match *name {
-                "ThighRelHip2_Z" => self.thigh_rel_hip2_z,
-                "Hip1RelTorso_X" => self.hip1_rel_torso_x,
-                "Hip1RelTorso_Z" => self.hip1_rel_torso_z,
-                "AnkleRelShank_Z" => self.ankle_rel_shank_z,
-                _ => self.elbow_rel_upper_arm_y,
-            };
-            if !value.is_finite() || value < *lo || value > *hi {
+        let mut copy = *self;
+        for k in KNOWN.iter().filter(|k| k.role == Role::Morphology) {
+            let value = copy.field_mut(k.param).map_or(f64::NAN, |f| *f);
+            if !value.is_finite() || value < k.min || value > k.max {
                 return Err(ModelError::Range {
-                    name: (*name).to_string(),
+                    name: k.name.to_string(),
                     value,
-                    lo: *lo,
-                    hi: *hi,
+                    lo: k.min,
+                    hi: k.max,
                 });
             }
         }
@@ -648,14 +653,10 @@ impl NaoModel {
         Ok(model)
     }
 
-    /// The league's type `t` with some morphology quantities overridden by name.
-    pub fn with_params(t: u8, params: &[(String, f64)]) -> Result<Self, ModelError> {
+    /// The league's type `t` with the morphology values of a decoded set.
+    pub fn with_params(t: u8, values: &ParamValues) -> Result<Self, ModelError> {
         let mut m = Morphology::of_type(t)?;
-        for (name, v) in params {
-            if Morphology::is_morphology(name) {
-                m.set(name, *v)?;
-            }
-        }
+        m.apply(values)?;
         Self::new(m)
     }
 
@@ -774,15 +775,15 @@ mod tests {
     #[test]
     fn hip_to_sole_follows_the_thigh() {
         let mut mo = Morphology::of_type(0).unwrap();
-        mo.set("ThighRelHip2_Z", -0.079).unwrap();
+        mo.set(Param::ThighRelHip2Z, -0.079).unwrap();
         assert!(close(mo.hip_to_sole_m(), 0.309, 1e-9));
         for v in [-0.10, -0.01] {
             assert!(
-                mo.set("ThighRelHip2_Z", v).is_ok(),
+                mo.set(Param::ThighRelHip2Z, v).is_ok(),
                 "the paper's range is accepted"
             );
         }
-        let e = mo.set("ThighRelHip2_Z", 0.02).unwrap_err().to_string();
+        let e = mo.set(Param::ThighRelHip2Z, 0.02).unwrap_err().to_string();
         assert!(
             e.contains("ThighRelHip2_Z") && e.contains("[-0.12, -0.005]"),
             "{e}"

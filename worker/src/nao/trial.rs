@@ -11,14 +11,15 @@
 //! - actuator noise: N(0, [`ACTUATOR_NOISE_RAD_S`]) rad/s added to each command;
 //! - ground friction: uniform in [`FRICTION_RANGE`].
 
+use protocol::measurement::Measurement;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use serde::Serialize;
 
 use super::model::{ModelError, NaoModel};
 use super::sim::{fallen, standing_angles, Perception, Sim, SimError, SimSettings, Start, CYCLE_S};
 use super::walk::{Gait, WalkParams};
-use crate::synthetic::gauss;
+use crate::noise::gauss;
+use protocol::params::ParamValues;
 
 /// Initial joint jitter, ± degrees.
 pub const INIT_JITTER_DEG: f64 = 2.0;
@@ -29,24 +30,16 @@ pub const ACTUATOR_NOISE_RAD_S: f64 = 0.1;
 /// Ground friction spread.
 pub const FRICTION_RANGE: (f64, f64) = (0.7, 1.1);
 
-/// What one trial did.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+/// What one trial did: its measurement, and how it was made.
+#[derive(Debug, Clone, PartialEq)]
 pub struct NaoTrial {
     /// The trial's seed.
     pub seed: u64,
-    /// Whether it fell.
-    pub fell: bool,
-    /// Torso displacement forward, m.
-    pub x: f64,
-    /// Torso displacement left, m.
-    pub y: f64,
-    /// Simulated time of the fall, s.
-    pub fall_time_s: Option<f64>,
+    /// What it measured.
+    pub measurement: Measurement,
     /// Whether the fall was the physics diverging ([`SimError::Diverged`]),
     /// counted as a fall with no distance.
     pub diverged: bool,
-    /// Simulated time run, s.
-    pub sim_time_s: f64,
 }
 
 /// Why a trial could not run.
@@ -58,12 +51,15 @@ pub enum NaoTrialError {
     /// The simulation could not start.
     #[error(transparent)]
     Sim(#[from] SimError),
+    /// A trial's thread panicked (a bug): the panic's message.
+    #[error("a trial thread panicked: {0}")]
+    Panicked(String),
 }
 
 /// Runs one trial of parameter set `params` (named; unset ones at expert).
 pub fn run(
     robot_type: u8,
-    params: &[(String, f64)],
+    params: &ParamValues,
     seed: u64,
     duration_s: f64,
     settings: SimSettings,
@@ -82,14 +78,14 @@ pub fn run(
 /// with [`Sim::body_poses`] for a replay, or to check the robot).
 pub fn run_observed(
     robot_type: u8,
-    params: &[(String, f64)],
+    params: &ParamValues,
     seed: u64,
     duration_s: f64,
     mut settings: SimSettings,
     observe: &mut dyn FnMut(&Sim, &Perception),
 ) -> Result<NaoTrial, NaoTrialError> {
     let model = NaoModel::with_params(robot_type, params)?;
-    let walk = WalkParams::from_named(params);
+    let walk: WalkParams = params.walk();
     let gait = Gait::new(&model, walk, duration_s);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let rest = standing_angles(&model);
@@ -128,12 +124,14 @@ pub fn run_observed(
                 // An exploded simulation is a fall, never a distance.
                 return Ok(NaoTrial {
                     seed,
-                    fell: true,
-                    x: 0.0,
-                    y: 0.0,
-                    fall_time_s: Some(t),
+                    measurement: Measurement {
+                        fell: true,
+                        x_m: 0.0,
+                        y_m: 0.0,
+                        fall_time_s: Some(t),
+                        sim_time_s: t,
+                    },
                     diverged: true,
-                    sim_time_s: t,
                 });
             }
             Err(e) => return Err(e.into()),
@@ -148,12 +146,14 @@ pub fn run_observed(
     let p = perception.torso_position_m;
     Ok(NaoTrial {
         seed,
-        fell: fall_time_s.is_some(),
-        x: p[0] - p0[0],
-        y: p[1] - p0[1],
-        fall_time_s,
+        measurement: Measurement {
+            fell: fall_time_s.is_some(),
+            x_m: p[0] - p0[0],
+            y_m: p[1] - p0[1],
+            fall_time_s,
+            sim_time_s: perception.time_s,
+        },
         diverged: false,
-        sim_time_s: perception.time_s,
     })
 }
 
@@ -161,7 +161,7 @@ pub fn run_observed(
 /// `seed0, seed0 + 1, …` with physics `settings`; results in seed order whatever the threads.
 pub fn run_many(
     robot_type: u8,
-    params: &[(String, f64)],
+    params: &ParamValues,
     seed0: u64,
     n: u64,
     duration_s: f64,
@@ -188,13 +188,29 @@ pub fn run_many(
             .collect();
         handles
             .into_iter()
-            .flat_map(|h| h.join().unwrap_or_default())
+            .flat_map(|h| match h.join() {
+                Ok(mine) => mine,
+                Err(p) => vec![Err(NaoTrialError::Panicked(
+                    p.downcast_ref::<&str>()
+                        .map(|s| (*s).to_string())
+                        .or_else(|| p.downcast_ref::<String>().cloned())
+                        .unwrap_or_else(|| "(no message)".into()),
+                ))],
+            })
             .collect()
     });
+    let panicked = out.iter().find_map(|r| match r {
+        Err(e @ NaoTrialError::Panicked(_)) => Some(e.clone()),
+        _ => None,
+    });
+    if let Some(e) = panicked {
+        return Err(e);
+    }
     out.sort_by_key(|r| r.as_ref().map_or(0, |t| t.seed.wrapping_sub(seed0)));
     if out.len() as u64 != n {
-        return Err(NaoTrialError::Sim(SimError::Settings(
-            "a trial thread panicked".into(),
+        return Err(NaoTrialError::Panicked(format!(
+            "{} of {n} trials came back",
+            out.len()
         )));
     }
     out.into_iter().collect()
@@ -208,48 +224,78 @@ mod tests {
     /// mx ≥ 1.5 m in 10 s, my/mx < 0.25) with a spread (ex > 0).
     #[test]
     fn the_expert_set_walks() {
-        let ts = run_many(0, &[], 1000, 100, 10.0, 2, SimSettings::default()).unwrap();
-        let ok: Vec<&NaoTrial> = ts.iter().filter(|t| !t.fell).collect();
+        let ts = run_many(
+            0,
+            &ParamValues::default(),
+            1000,
+            100,
+            10.0,
+            2,
+            SimSettings::default(),
+        )
+        .unwrap();
+        let ok: Vec<&NaoTrial> = ts.iter().filter(|t| !t.measurement.fell).collect();
         let n = ok.len() as f64;
         let s = n / ts.len() as f64;
-        let mx = ok.iter().map(|t| t.x).sum::<f64>() / n;
-        let my = ok.iter().map(|t| t.y.abs()).sum::<f64>() / n;
-        let ex = (ok.iter().map(|t| (t.x - mx).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+        let mx = ok.iter().map(|t| t.measurement.x_m).sum::<f64>() / n;
+        let my = ok.iter().map(|t| t.measurement.y_m.abs()).sum::<f64>() / n;
+        let ex = (ok
+            .iter()
+            .map(|t| (t.measurement.x_m - mx).powi(2))
+            .sum::<f64>()
+            / (n - 1.0))
+            .sqrt();
         assert!(s >= 0.7, "s = {s}");
         assert!(mx >= 1.5, "mx = {mx}");
         assert!(my / mx < 0.25, "my/mx = {}", my / mx);
         assert!(ex > 0.0);
         // Seed order whatever the threads.
-        let again = run_many(0, &[], 1000, 4, 10.0, 1, SimSettings::default()).unwrap();
+        let again = run_many(
+            0,
+            &ParamValues::default(),
+            1000,
+            4,
+            10.0,
+            1,
+            SimSettings::default(),
+        )
+        .unwrap();
         assert_eq!(&ts[..4], &again[..]);
     }
 
     #[test]
     fn same_seed_same_bits_other_seed_other_numbers() {
-        let a = run(0, &[], 11, 3.0, SimSettings::default()).unwrap();
-        let b = run(0, &[], 11, 3.0, SimSettings::default()).unwrap();
-        let c = run(0, &[], 12, 3.0, SimSettings::default()).unwrap();
-        assert_eq!(a.x.to_bits(), b.x.to_bits());
-        assert_eq!(a.y.to_bits(), b.y.to_bits());
-        assert_ne!(a.x.to_bits(), c.x.to_bits());
+        let a = run(0, &ParamValues::default(), 11, 3.0, SimSettings::default()).unwrap();
+        let b = run(0, &ParamValues::default(), 11, 3.0, SimSettings::default()).unwrap();
+        let c = run(0, &ParamValues::default(), 12, 3.0, SimSettings::default()).unwrap();
+        assert_eq!(a.measurement.x_m.to_bits(), b.measurement.x_m.to_bits());
+        assert_eq!(a.measurement.y_m.to_bits(), b.measurement.y_m.to_bits());
+        assert_ne!(a.measurement.x_m.to_bits(), c.measurement.x_m.to_bits());
     }
 
     #[test]
     fn walking_keeps_joints_within_a_degree_of_their_limits() {
-        let model = NaoModel::with_params(0, &[]).unwrap();
+        let model = NaoModel::with_params(0, &ParamValues::default()).unwrap();
         let tol = 1f64.to_radians();
         let mut cycles = 0;
-        let t = run_observed(0, &[], 3, 10.0, SimSettings::default(), &mut |_, p| {
-            cycles += 1;
-            for (j, a) in model.joints.iter().zip(&p.joint_angles_rad) {
-                assert!(
-                    *a >= j.limits_rad.0 - tol && *a <= j.limits_rad.1 + tol,
-                    "{} at {a} outside {:?}",
-                    j.name,
-                    j.limits_rad
-                );
-            }
-        })
+        let t = run_observed(
+            0,
+            &ParamValues::default(),
+            3,
+            10.0,
+            SimSettings::default(),
+            &mut |_, p| {
+                cycles += 1;
+                for (j, a) in model.joints.iter().zip(&p.joint_angles_rad) {
+                    assert!(
+                        *a >= j.limits_rad.0 - tol && *a <= j.limits_rad.1 + tol,
+                        "{} at {a} outside {:?}",
+                        j.name,
+                        j.limits_rad
+                    );
+                }
+            },
+        )
         .unwrap();
         assert!(cycles > 10, "{t:?}");
     }
@@ -271,8 +317,9 @@ mod tests {
         let mut falls = 0;
         for c in corners {
             let p: Vec<(String, f64)> = c.iter().map(|(n, v)| ((*n).to_string(), *v)).collect();
+            let p = ParamValues::from_named(&p).unwrap();
             let ts = run_many(0, &p, 0, 4, 10.0, 2, SimSettings::default()).unwrap();
-            falls += ts.iter().filter(|t| t.fell).count();
+            falls += ts.iter().filter(|t| t.measurement.fell).count();
         }
         assert!(falls > 0);
     }
@@ -285,7 +332,7 @@ mod probe {
     #[test]
     #[ignore = "diagnostic for #3: prints the worst joint-limit excess over a grid of L"]
     fn worst_limit_excess_over_l() {
-        let model = NaoModel::with_params(0, &[]).unwrap();
+        let model = NaoModel::with_params(0, &ParamValues::default()).unwrap();
         let sets: Vec<Vec<(String, f64)>> = {
             let mut v = Vec::new();
             for step in [0.08, 0.10, 0.12, 0.15] {
@@ -302,7 +349,8 @@ mod probe {
             v
         };
         let mut worst: Vec<(f64, String)> = Vec::new();
-        for p in &sets {
+        for named in &sets {
+            let p = &ParamValues::from_named(named).unwrap();
             let m = NaoModel::with_params(0, p).unwrap();
             let mut excess = vec![0.0f64; m.joints.len()];
             let mut when = vec![0.0f64; m.joints.len()];
@@ -340,7 +388,7 @@ mod probe {
                 e.to_degrees(),
                 format!(
                     "{} at {:.2}s fell {:?} {:?}",
-                    model.joints[k].name, when[k], tr.fall_time_s, p
+                    model.joints[k].name, when[k], tr.measurement.fall_time_s, named
                 ),
             ));
         }

@@ -58,41 +58,7 @@ pub const PITCH_ABOVE_ROLL: f64 = 0.005;
 const G: f64 = 9.81;
 const GRID_S: f64 = 0.005;
 
-/// The walk's parameters (experiment 2's L minus the morphology).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct WalkParams {
-    /// `ratio_flexion`.
-    pub ratio_flexion: f64,
-    /// `long_offset_MidAnkles_2_Torso_Init`, m.
-    pub long_offset: f64,
-    /// `height_lift`, m.
-    pub height_lift: f64,
-    /// `xlength_step_max`, m.
-    pub step_length: f64,
-}
-
-impl WalkParams {
-    /// The paper's expert values.
-    pub const EXPERT: Self = Self {
-        ratio_flexion: 0.73,
-        long_offset: 0.011,
-        height_lift: 0.042,
-        step_length: 0.08,
-    };
-
-    /// From named values, the expert value for any not given.
-    #[must_use]
-    pub fn from_named(params: &[(String, f64)]) -> Self {
-        let get = |n: &str, d: f64| params.iter().find(|(k, _)| k == n).map_or(d, |(_, v)| *v);
-        let e = Self::EXPERT;
-        Self {
-            ratio_flexion: get("ratio_flexion", e.ratio_flexion),
-            long_offset: get("long_offset_MidAnkles_2_Torso_Init", e.long_offset),
-            height_lift: get("height_lift", e.height_lift),
-            step_length: get("xlength_step_max", e.step_length),
-        }
-    }
-}
+pub use protocol::params::WalkParams;
 
 /// Leg geometry for the IK, from the morphology.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -393,7 +359,9 @@ mod tests {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
         for tz in [-0.10, -0.08, -0.06, -0.04, -0.03, -0.01] {
             let mut morph = Morphology::of_type(0).unwrap();
-            morph.set("ThighRelHip2_Z", tz).unwrap();
+            morph
+                .set(protocol::params::Param::ThighRelHip2Z, tz)
+                .unwrap();
             let model = NaoModel::new(morph).unwrap();
             let leg = Leg::of(&model);
             let mut checked = 0;
