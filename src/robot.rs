@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use anyhow::anyhow;
 use clap::Args;
-use protocol::pickout::stats;
+use protocol::{measurement::Measurement, pickout::stats};
 use worker::nao::trial::NaoTrial;
 use worker::nao::{
     model::NaoModel,
@@ -131,10 +131,27 @@ pub struct TrialArgs {
     /// (default 0: the league's robot has none).
     #[arg(long)]
     armature: Option<f64>,
-    /// Record the first trial (seed --seed): every body's pose each 20 ms
-    /// cycle, as JSON lines, for a replay.
+    /// Record the first trial (seed --seed; with --run, the farm trial):
+    /// every body's pose each 20 ms cycle, as JSON lines, for a replay.
     #[arg(long, value_name = "FILE")]
     record: Option<std::path::PathBuf>,
+    /// Replay a farm trial of this run directory (with --iteration and
+    /// --trial): its parameters, robot type, physics and seed come from the
+    /// journal, and the result is compared with the journaled one bit for bit.
+    #[arg(
+        long = "run",
+        value_name = "DIR",
+        requires_all = ["iteration", "trial"],
+        conflicts_with_all = ["params", "trials", "seed", "robot_type", "duration", "substeps",
+            "solver_iterations", "pgs_iterations", "armature"]
+    )]
+    run_dir: Option<std::path::PathBuf>,
+    /// With --run: the iteration.
+    #[arg(long, requires = "run_dir")]
+    iteration: Option<u64>,
+    /// With --run: the trial index within the iteration.
+    #[arg(long, requires = "run_dir")]
+    trial: Option<u32>,
     /// Machine-readable output with every trial.
     #[arg(long)]
     json: bool,
@@ -142,6 +159,9 @@ pub struct TrialArgs {
 
 /// `naofarm trial`: n trials of one parameter set, the Table IV row.
 pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
+    if let (Some(dir), Some(i), Some(k)) = (&a.run_dir, a.iteration, a.trial) {
+        return replay(a, dir, i, k);
+    }
     if a.set != "expert" {
         return Err(Failure::Usage(anyhow!(
             "--set `{}`: the only named set is `expert`",
@@ -176,7 +196,14 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     })?;
     let settings = SimSettings::with_physics(&physics);
     if let Some(path) = &a.record {
-        record(path, a, &params, &values, settings)?;
+        let what = Recording {
+            robot_type: a.robot_type,
+            seed: a.seed,
+            duration: a.duration,
+            params: &params,
+            values: &values,
+        };
+        record(path, &what, settings)?;
     }
     let t0 = Instant::now();
     let runs = trial::run_many(
@@ -233,6 +260,110 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     Ok(())
 }
 
+/// Whether two measurements are the same to the bit.
+fn same_bits(a: &Measurement, b: &Measurement) -> bool {
+    a.fell == b.fell
+        && a.x_m.to_bits() == b.x_m.to_bits()
+        && a.y_m.to_bits() == b.y_m.to_bits()
+        && a.fall_time_s.map(f64::to_bits) == b.fall_time_s.map(f64::to_bits)
+        && a.sim_time_s.to_bits() == b.sim_time_s.to_bits()
+}
+
+fn measurement_json(m: &Measurement) -> serde_json::Value {
+    serde_json::json!({
+        "fell": m.fell,
+        "x_m": m.x_m,
+        "y_m": m.y_m,
+        "fall_time_s": m.fall_time_s,
+        "sim_time_s": m.sim_time_s,
+    })
+}
+
+/// `naofarm trial --run DIR --iteration I --trial K`: re-runs a farm trial
+/// exactly as its worker did, and compares it with the journal.
+fn replay(a: &TrialArgs, dir: &std::path::Path, iteration: u64, k: u32) -> Result<(), Failure> {
+    use coordinator::run::{farm_trial, RunError};
+    let ft = farm_trial(dir, iteration, k).map_err(|e| match e {
+        RunError::Refused(_) => Failure::Usage(anyhow!("--run {}: {e}", dir.display())),
+        RunError::Journal(coordinator::journal::JournalError::Io { .. }) => {
+            Failure::Usage(e.into())
+        }
+        e => Failure::Job(e.into()),
+    })?;
+    let req = &ft.request;
+    let values = ParamValues::from_named(&req.params).map_err(|e| Failure::Job(e.into()))?;
+    if let Some(path) = &a.record {
+        if req.model != protocol::TrialModel::Nao {
+            return Err(Failure::Usage(anyhow!(
+                "--record: the run's model is {:?}; only NAO trials have poses",
+                req.model
+            )));
+        }
+        let what = Recording {
+            robot_type: req.robot_type,
+            seed: req.seed,
+            duration: req.duration_s,
+            params: &req.params,
+            values: &values,
+        };
+        record(path, &what, SimSettings::with_physics(&req.physics))?;
+    }
+    let m = worker::run_trial(req).map_err(|e| Failure::Job(e.into()))?;
+    let same = ft.journaled.as_ref().map(|(j, _)| same_bits(j, &m));
+    if a.json {
+        outln!(
+            "{}",
+            serde_json::json!({
+                "run": req.run,
+                "iteration": iteration,
+                "trial": k,
+                "seed": req.seed,
+                "robot_type": req.robot_type,
+                "params": params_json(&req.params),
+                "replayed": measurement_json(&m),
+                "journaled": ft.journaled.as_ref().map(|(j, _)| measurement_json(j)),
+                "worker": ft.journaled.as_ref().map(|(_, w)| w),
+                "identical": same,
+            })
+        );
+    } else {
+        let line = |m: &Measurement| {
+            format!(
+                "x {} m, y {} m, {}",
+                m.x_m,
+                m.y_m,
+                m.fall_time_s
+                    .map_or("no fall".to_string(), |t| format!("fell at {t} s"))
+            )
+        };
+        outln!(
+            "run `{}` iteration {iteration} trial {k} (seed {}): {}",
+            req.run,
+            req.seed,
+            line(&m)
+        );
+        match &ft.journaled {
+            Some((j, w)) => outln!(
+                "journaled by worker {w}: {} — {}",
+                line(j),
+                if same == Some(true) {
+                    "identical to the bit"
+                } else {
+                    "DIFFERENT"
+                }
+            ),
+            None => outln!("not journaled yet (the trial has not been run on the farm)"),
+        }
+    }
+    if same == Some(false) {
+        return Err(Failure::Job(anyhow!(
+            "the replay of iteration {iteration} trial {k} differs from the journal \
+             (another build or CPU than the worker that ran it?)"
+        )));
+    }
+    Ok(())
+}
+
 /// One trial as `trial --json` lists it.
 fn trial_json(t: &NaoTrial) -> serde_json::Value {
     let m = &t.measurement;
@@ -255,35 +386,49 @@ fn params_json(params: &[(String, f64)]) -> serde_json::Map<String, serde_json::
         .collect()
 }
 
-/// Writes the replay of trial `a.seed`: a header line (robot type, seed,
+/// One trial to record: which robot, seed, duration and parameters.
+#[derive(Clone, Copy)]
+struct Recording<'a> {
+    robot_type: u8,
+    seed: u64,
+    duration: f64,
+    params: &'a [(String, f64)],
+    values: &'a ParamValues,
+}
+
+/// Writes the replay of one trial: a header line (robot type, seed,
 /// parameters, body names and shapes), then one line per cycle with the time
 /// and every body's centre pose (x, y, z, qx, qy, qz, qw; world frame, m).
 fn record(
     path: &std::path::Path,
-    a: &TrialArgs,
-    params: &[(String, f64)],
-    values: &ParamValues,
+    what: &Recording<'_>,
     settings: SimSettings,
 ) -> Result<(), Failure> {
+    let Recording {
+        robot_type,
+        seed,
+        duration,
+        params,
+        values,
+    } = *what;
     use std::io::Write;
     let file = std::fs::File::create(path)
         .map_err(|e| Failure::Usage(anyhow!("--record {}: {e}", path.display())))?;
     let mut out = std::io::BufWriter::new(file);
-    let model =
-        NaoModel::with_params(a.robot_type, values).map_err(|e| Failure::Usage(e.into()))?;
+    let model = NaoModel::with_params(robot_type, values).map_err(|e| Failure::Usage(e.into()))?;
     let header = serde_json::json!({
-        "robot_type": a.robot_type,
-        "seed": a.seed,
+        "robot_type": robot_type,
+        "seed": seed,
         "params": params_json(params),
         "cycle_s": CYCLE_S,
         "bodies": model.bodies.iter().map(|b| serde_json::json!({"name": b.name, "shape": b.shape})).collect::<Vec<_>>(),
     });
     let mut io = writeln!(out, "{header}");
     let t = trial::run_observed(
-        a.robot_type,
+        robot_type,
         values,
-        a.seed,
-        a.duration,
+        seed,
+        duration,
         settings,
         &mut |sim, p| {
             if io.is_ok() {
@@ -297,7 +442,7 @@ fn record(
         .map_err(|e| Failure::Job(anyhow!("--record {}: {e}", path.display())))?;
     eprintln!(
         "recorded seed {} ({} cycles{}) to {}",
-        a.seed,
+        seed,
         (t.measurement.sim_time_s / CYCLE_S).round(),
         if t.measurement.fell { ", fell" } else { "" },
         path.display()

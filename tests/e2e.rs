@@ -1049,6 +1049,70 @@ fn the_main_job_runs_five_nao_iterations() {
     let finished = ev.finished.expect("finished line");
     assert_eq!(finished["status"]["decided"], 5);
     assert_eq!(finished["status"]["finished"], true);
+
+    // A farm trial replayed locally gives the journaled x, y and fall time bit for bit.
+    let run_dir = dir.join("run");
+    let journaled = coordinator::journal::Journal::read(&run_dir)
+        .unwrap()
+        .records()
+        .into_iter()
+        .find_map(|r| match r {
+            coordinator::journal::Record::Outcome {
+                iteration: 4,
+                trial: 7,
+                measurement,
+                ..
+            } => Some(measurement),
+            _ => None,
+        })
+        .expect("trial 4/7 journaled");
+    let record = dir.join("replay.jsonl");
+    let out = succeed(
+        naofarm()
+            .args([
+                "trial",
+                "--json",
+                "--iteration",
+                "4",
+                "--trial",
+                "7",
+                "--run",
+            ])
+            .arg(&run_dir)
+            .arg("--record")
+            .arg(&record),
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["identical"], true, "{v}");
+    let bits = |x: &serde_json::Value| x.as_f64().map(f64::to_bits);
+    assert_eq!(bits(&v["replayed"]["x_m"]), Some(journaled.x_m.to_bits()));
+    assert_eq!(bits(&v["replayed"]["y_m"]), Some(journaled.y_m.to_bits()));
+    assert_eq!(
+        v["replayed"]["fall_time_s"].as_f64().map(f64::to_bits),
+        journaled.fall_time_s.map(f64::to_bits)
+    );
+    let header: serde_json::Value = serde_json::from_str(
+        std::fs::read_to_string(&record)
+            .unwrap()
+            .lines()
+            .next()
+            .unwrap(),
+    )
+    .unwrap();
+    assert_eq!(
+        header["seed"], v["seed"],
+        "the replay records the farm trial's seed"
+    );
+    let err = String::from_utf8_lossy(
+        &naofarm()
+            .args(["trial", "--iteration", "99", "--trial", "0", "--run"])
+            .arg(&run_dir)
+            .output()
+            .unwrap()
+            .stderr,
+    )
+    .to_string();
+    assert!(err.contains("iteration 99 is not open"), "{err}");
 }
 
 #[test]

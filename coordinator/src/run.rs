@@ -530,20 +530,13 @@ impl Run {
 
     /// The trial request for trial `k` of an opened iteration.
     #[must_use]
-    pub fn request(&self, opened: &OpenedIteration, k: u32, dispatch: u64) -> TrialRequest {
-        let exp = self.ev.experiment();
-        TrialRequest {
-            run: exp.name.clone(),
-            iteration: opened.iteration,
-            trial: k,
-            seed: opened.seeds.get(k as usize).copied().unwrap_or_default(),
-            model: exp.model,
-            robot_type: exp.robot_type,
-            duration_s: exp.trial_duration_s,
-            params: exp.full_params(&opened.params),
-            dispatch,
-            physics: exp.physics,
-        }
+    pub fn request(
+        &self,
+        opened: &OpenedIteration,
+        k: u32,
+        dispatch: u64,
+    ) -> Result<TrialRequest, OutcomeError> {
+        request(self.ev.experiment(), opened, k, dispatch)
     }
 
     /// The evolve state machine (read-only).
@@ -563,6 +556,70 @@ impl Run {
     pub fn extended_from(&self) -> Option<u64> {
         self.extended_from
     }
+}
+
+/// The request for trial `k` of an opened iteration: exactly what a worker gets.
+pub fn request(
+    exp: &Experiment,
+    opened: &OpenedIteration,
+    k: u32,
+    dispatch: u64,
+) -> Result<TrialRequest, OutcomeError> {
+    let seed = opened
+        .seeds
+        .get(k as usize)
+        .copied()
+        .ok_or(OutcomeError::UnknownTrial {
+            iteration: opened.iteration,
+            trial: k,
+        })?;
+    Ok(TrialRequest {
+        run: exp.name.clone(),
+        iteration: opened.iteration,
+        trial: k,
+        seed,
+        model: exp.model,
+        robot_type: exp.robot_type,
+        duration_s: exp.trial_duration_s,
+        params: exp.full_params(&opened.params),
+        dispatch,
+        physics: exp.physics,
+    })
+}
+
+/// A farm trial as its run's journal tells it: the request a worker got, and
+/// what was journaled for it (if it was run).
+#[derive(Debug, Clone)]
+pub struct FarmTrial {
+    /// The request (dispatch 0).
+    pub request: TrialRequest,
+    /// The journaled measurement and the worker that made it.
+    pub journaled: Option<(Measurement, String)>,
+}
+
+/// Reads trial `trial` of iteration `iteration` of the run in `dir` (only reads).
+pub fn farm_trial(dir: &Path, iteration: u64, trial: u32) -> Result<FarmTrial, RunError> {
+    let view = read_run(dir)?;
+    let records = Journal::read(dir)?.records();
+    let opened = records
+        .iter()
+        .find_map(|r| match r {
+            Record::Opened(o) if o.iteration == iteration => Some(o.clone()),
+            _ => None,
+        })
+        .ok_or(RunError::Refused(OutcomeError::UnknownIteration(iteration)))?;
+    let request = request(&view.experiment, &opened, trial, 0)?;
+    let journaled = records.into_iter().find_map(|r| match r {
+        Record::Outcome {
+            iteration: i,
+            trial: k,
+            measurement,
+            worker,
+            ..
+        } if i == iteration && k == trial => Some((measurement, worker)),
+        _ => None,
+    });
+    Ok(FarmTrial { request, journaled })
 }
 
 /// A run as its journal tells it, read without writing anything.
@@ -810,7 +867,9 @@ pub fn drive_local(
         for e in effects {
             if let Effect::Dispatch(o, ks) = e {
                 for k in ks {
-                    queue.push(run.request(&o, k, 0));
+                    if let Ok(r) = run.request(&o, k, 0) {
+                        queue.push(r);
+                    }
                 }
             }
         }
@@ -926,7 +985,7 @@ n_mcmc = 200
         let Effect::Dispatch(o, _) = &effects[0] else {
             panic!()
         };
-        let req = run.request(o, 0, 0);
+        let req = run.request(o, 0, 0).unwrap();
         let r = synthetic(&req);
         let (c, _) = run.on_outcome(0, 0, req.seed, r, "w").unwrap();
         assert_eq!(c, Counted::New);
@@ -935,7 +994,7 @@ n_mcmc = 200
         let mut nan = r;
         nan.x_m = f64::NAN;
         assert!(matches!(
-            run.on_outcome(0, 1, run.request(o, 1, 0).seed, nan, "w"),
+            run.on_outcome(0, 1, run.request(o, 1, 0).unwrap().seed, nan, "w"),
             Err(RunError::Refused(_))
         ));
         assert!(matches!(
@@ -971,7 +1030,7 @@ n_mcmc = 200
             let enqueue = |run: &Run, effects: Vec<Effect>, q: &mut Vec<TrialRequest>| {
                 for e in effects {
                     if let Effect::Dispatch(o, ks) = e {
-                        q.extend(ks.into_iter().map(|k| run.request(&o, k, 0)));
+                        q.extend(ks.into_iter().map(|k| run.request(&o, k, 0).unwrap()));
                     }
                 }
             };
@@ -1129,7 +1188,7 @@ n_mcmc = 200
         let req = effects
             .iter()
             .find_map(|e| match e {
-                Effect::Dispatch(o, _) => Some(run.request(o, 0, 0)),
+                Effect::Dispatch(o, _) => Some(run.request(o, 0, 0).unwrap()),
                 _ => None,
             })
             .unwrap();

@@ -583,7 +583,14 @@ async fn dispatch(session: &Session, st: &mut State) {
             .map(|(id, _)| id.clone());
         let Some(id) = pick else { continue };
         st.dispatch += 1;
-        let req = st.run.request(opened, t.1, st.dispatch);
+        let req = match st.run.request(opened, t.1, st.dispatch) {
+            Ok(r) => r,
+            Err(e) => {
+                tracing::error!(error = %e, "a queued trial has no request; dropped");
+                st.queue.remove(&t);
+                continue;
+            }
+        };
         st.queue.remove(&t);
         if let Some(w) = st.workers.get_mut(&id) {
             w.assigned.insert(t);
