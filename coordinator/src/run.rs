@@ -529,7 +529,6 @@ impl Run {
     }
 
     /// The trial request for trial `k` of an opened iteration.
-    #[must_use]
     pub fn request(
         &self,
         opened: &OpenedIteration,
