@@ -1,5 +1,5 @@
 //! The CLOP benchmark harness: simple regret on the artificial problems of
-//! clop.md §11, CLOP beside baselines on the same outcome streams, and the
+//! `docs/spec/clop.md` §11, CLOP beside baselines on the same outcome streams, and the
 //! cost of one tell+ask as the history grows. A benchmark, not the optimiser:
 //! it reads the clock (only in [`cost`]).
 

@@ -1,4 +1,4 @@
-//! CLOP, Confident Local Optimization (Coulom 2011), as `../shared/spec/clop.md` states it.
+//! CLOP, Confident Local Optimization (Coulom 2011), as `docs/spec/clop.md` states it.
 //!
 //! A pure ask/tell state machine: [`Clop::ask`] draws the next point from a
 //! seed the caller derives, [`Clop::tell`] adds an outcome at a point, and the

@@ -1,4 +1,4 @@
-//! The evolving process (evolve.md, Algorithms 1 and 2) as a pure state machine.
+//! The evolving process (`docs/spec/evolve.md`, Algorithms 1 and 2) as a pure state machine.
 //!
 //! [`Evolve`] owns CLOP, ν′ and H. It emits [`Action`]s (open an iteration,
 //! an iteration was decided, the run is finished) and takes trial outcomes in

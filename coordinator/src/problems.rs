@@ -1,4 +1,4 @@
-//! The artificial test problems of clop.md §11: binary outcomes with
+//! The artificial test problems of `docs/spec/clop.md` §11: binary outcomes with
 //! `P(Win | u) = σ(g(u))` on `u ∈ [-1, 1]^d`.
 
 use serde::{Deserialize, Serialize};

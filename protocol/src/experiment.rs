@@ -33,7 +33,7 @@ fn invalid(field: impl Into<String>, message: impl Into<String>) -> ExperimentEr
     }
 }
 
-/// How CLOP maps a parameter onto its internal `[-1, 1]` coordinate (clop.md §2).
+/// How CLOP maps a parameter onto its internal `[-1, 1]` coordinate (`docs/spec/clop.md` §2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ParamKind {
@@ -103,7 +103,7 @@ impl TrialModel {
     }
 }
 
-/// Where the evolving process starts (evolve.md, Algorithm 1).
+/// Where the evolving process starts (`docs/spec/evolve.md`, Algorithm 1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum Start {
@@ -142,7 +142,7 @@ impl Default for PickOutConstants {
     }
 }
 
-/// CLOP's settings (clop.md §10); defaults are the reference's for real runs.
+/// CLOP's settings (`docs/spec/clop.md` §10); defaults are the reference's for real runs.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ClopSettings {

@@ -1,4 +1,4 @@
-//! pickOut (evolve.md, Algorithm 2) and what it works on: an iteration's
+//! pickOut (`docs/spec/evolve.md`, Algorithm 2) and what it works on: an iteration's
 //! statistics over its trials' [`Measurement`]s, the constants of Table III,
 //! the decision, ν′ ([`Incumbent`]) and the history H ([`HistoryPoint`]).
 //! Pure functions: no I/O, no clock.
@@ -29,7 +29,7 @@ pub struct HistoryPoint {
     pub decision: Decision,
 }
 
-/// Statistics of an iteration (evolve.md "(ours)": m and e over the successful
+/// Statistics of an iteration (`docs/spec/evolve.md` "(ours)": m and e over the successful
 /// trials, my = mean |y|, sample standard deviation; e absent with < 2 successes).
 #[must_use]
 pub fn stats(trials: &[Measurement]) -> Stats {

@@ -395,7 +395,7 @@ impl Decision {
     }
 }
 
-/// An iteration's statistics (evolve.md: m and e over successful trials).
+/// An iteration's statistics (`docs/spec/evolve.md`: m and e over successful trials).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Stats {
     /// Number of trials.

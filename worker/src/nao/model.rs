@@ -1,5 +1,5 @@
 //! The league's NAO as plain data: bodies and hinge joints of
-//! `nao-model.md` §2–§4, for types 0–4 and a variable morphology.
+//! `docs/spec/nao-model.md` §2–§4, for types 0–4 and a variable morphology.
 //!
 //! **World frame (decided once for the whole project):** x forward (walking
 //! direction), y left, z up, metres. The spec's torso frame (x right,
@@ -70,7 +70,7 @@ pub struct Joint {
     pub max_speed_rad_s: f64,
 }
 
-/// The heterogeneous-type quantities (`nao-model.md` §4), spec units.
+/// The heterogeneous-type quantities (`docs/spec/nao-model.md` §4), spec units.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Morphology {
     /// League type 0–4 this started from.

@@ -3,7 +3,7 @@
 //! early on a fall. A pure function of (p, seed, duration, settings).
 //!
 //! # Per-trial noise (all from the trial's seed)
-//! Sized, as `walk-feasibility` found, at 3–5× "tiny" so that success rates
+//! Sized, as the first LIP-3D feasibility study of this NAO found, at 3–5× "tiny" so that success rates
 //! between 0 and 1 appear near the limits of stability while the expert set
 //! keeps walking:
 //! - initial pose jitter: every joint uniform ±[`INIT_JITTER_DEG`]°;

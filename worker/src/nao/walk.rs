@@ -4,7 +4,7 @@
 //! It must stay a pure planner: joint targets as a function of time and
 //! parameters, no physics and no randomness (noise belongs to the trial).
 //!
-//! # The five parameters (experiment 2 of `evolve.md`)
+//! # The five parameters (experiment 2 of `docs/spec/evolve.md`)
 //! - `ThighRelHip2_Z` changes the thigh, hence the robot *and* the IK.
 //! - `ratio_flexion`: hip-centre height above the ankle-pitch axis over the
 //!   stretched leg (thigh + tibia); it sets the CoM height of the pendulum.
