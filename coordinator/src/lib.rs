@@ -19,5 +19,6 @@ pub mod journal;
 pub mod lock;
 pub mod problems;
 pub mod run;
+pub mod schedule;
 pub mod service;
 pub mod tune;

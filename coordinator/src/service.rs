@@ -9,9 +9,11 @@
 //! dropped; nothing reaches the journal unless the run accepts it.
 
 use std::{
-    collections::{BTreeMap, BTreeSet, HashMap},
-    time::{Duration, Instant},
+    collections::{BTreeMap, HashMap},
+    time::Duration,
 };
+
+use tokio::time::Instant;
 
 use protocol::{
     keys,
@@ -22,6 +24,7 @@ use zenoh::{bytes::Encoding, sample::SampleKind, Session};
 use crate::{
     evolve::{DecidedIteration, OpenedIteration},
     run::{Effect, FailureVerdict, Run, RunError},
+    schedule::Scheduler,
 };
 
 /// Settings of the coordinator service.
@@ -101,36 +104,11 @@ fn zerr(e: impl std::fmt::Display) -> ServiceError {
     ServiceError::Zenoh(e.to_string())
 }
 
-#[derive(Debug)]
-struct WorkerInfo {
-    slots: u32,
-    assigned: BTreeSet<(u64, u32)>,
-    last_seen: Instant,
-}
-
-impl WorkerInfo {
-    fn new(slots: u32) -> Self {
-        Self {
-            slots,
-            assigned: BTreeSet::new(),
-            last_seen: Instant::now(),
-        }
-    }
-}
-
-#[derive(Debug)]
-struct Inflight {
-    worker: String,
-    deadline: Instant,
-}
-
 struct State {
     run: Run,
     cfg: ServiceConfig,
     opened: BTreeMap<u64, OpenedIteration>,
-    queue: BTreeSet<(u64, u32)>,
-    inflight: HashMap<(u64, u32), Inflight>,
-    workers: BTreeMap<String, WorkerInfo>,
+    sched: Scheduler,
     dispatch: u64,
     counters: Counters,
     finished: bool,
@@ -163,7 +141,7 @@ impl State {
             rejects: r,
             best: ev.best_wire(),
             optim2: ev.named(&ev.optim2()),
-            workers: u32::try_from(self.workers.len()).unwrap_or(u32::MAX),
+            workers: u32::try_from(self.sched.workers()).unwrap_or(u32::MAX),
             trials_per_s: rate,
             finished: ev.finished(),
         }
@@ -184,13 +162,16 @@ impl State {
     /// A worker is gone (token dropped, or silent): its trials count as failed
     /// by it and go back to the queue.
     fn requeue_worker(&mut self, id: &str) -> Result<(), ServiceError> {
-        if let Some(w) = self.workers.remove(id) {
-            tracing::info!(worker = id, "worker gone; its trials go back to the queue");
-            for t in w.assigned {
-                if self.inflight.remove(&t).is_some() {
-                    self.failed(t, id, "the worker went away while holding the trial")?;
-                }
-            }
+        let held = self.sched.worker_gone(id);
+        if !held.is_empty() {
+            tracing::info!(
+                worker = id,
+                trials = held.len(),
+                "worker gone; its trials go back to the queue"
+            );
+        }
+        for t in held {
+            self.failed(t, id, "the worker went away while holding the trial")?;
         }
         Ok(())
     }
@@ -203,7 +184,7 @@ impl State {
             FailureVerdict::Retry => {
                 self.counters.failures += 1;
                 self.counters.redispatched += 1;
-                self.queue.insert(t);
+                self.sched.enqueue(t);
             }
             FailureVerdict::GiveUp(g) => {
                 self.counters.failures += 1;
@@ -223,6 +204,7 @@ impl State {
             *n += 1;
             if *n == SET_ASIDE_AFTER && !self.counters.set_aside.contains(&w) {
                 tracing::warn!(worker = %w, "set aside: it failed {SET_ASIDE_AFTER} trials that other workers ran");
+                self.sched.set_aside(&w);
                 self.counters.set_aside.push(w);
             }
         }
@@ -273,11 +255,9 @@ pub async fn serve(
         .map_err(zerr)?;
     let mut st = State {
         run,
+        sched: Scheduler::new(cfg.lease, cfg.silence),
         cfg,
         opened: BTreeMap::new(),
-        queue: BTreeSet::new(),
-        inflight: HashMap::new(),
-        workers: BTreeMap::new(),
         dispatch: 0,
         counters: Counters::default(),
         finished: false,
@@ -334,13 +314,8 @@ pub async fn serve(
                 match TrialFailure::decode(&s.payload().to_bytes()) {
                     Ok(f) if f.run == name => {
                         let t = (f.iteration, f.trial);
-                        if st.inflight.get(&t).is_some_and(|x| x.worker == f.worker) {
+                        if st.sched.answered(t, &f.worker, Instant::now()) {
                             tracing::warn!(worker = %f.worker, iteration = f.iteration, trial = f.trial, reason = %f.reason, "a worker could not run a trial");
-                            st.inflight.remove(&t);
-                            if let Some(w) = st.workers.get_mut(&f.worker) {
-                                w.assigned.remove(&t);
-                                w.last_seen = Instant::now();
-                            }
                             st.failed(t, &f.worker, &f.reason)?;
                             dispatch(&session, &mut st).await;
                         } else {
@@ -358,11 +333,7 @@ pub async fn serve(
             s = presence.recv_async() => {
                 let s = s.map_err(zerr)?;
                 match WorkerPresence::decode(&s.payload().to_bytes()) {
-                    Ok(p) => {
-                        let w = st.workers.entry(p.worker.clone()).or_insert_with(|| WorkerInfo::new(p.slots));
-                        w.slots = p.slots;
-                        w.last_seen = Instant::now();
-                    }
+                    Ok(p) => st.sched.worker_seen(&p.worker, Some(p.slots), Instant::now()),
                     Err(e) => {
                         st.counters.refused += 1;
                         tracing::warn!(error = %e, "refused a presence message");
@@ -376,7 +347,7 @@ pub async fn serve(
                     st.requeue_worker(&id)?;
                 } else {
                     // Slots arrive with the first heartbeat; until then one.
-                    st.workers.entry(id).or_insert_with(|| WorkerInfo::new(1));
+                    st.sched.worker_seen(&id, None, Instant::now());
                 }
             }
             q = status_q.recv_async() => {
@@ -394,23 +365,15 @@ pub async fn serve(
                 }
             }
             _ = tick.tick() => {
-                let now = Instant::now();
-                let expired: Vec<(u64, u32)> = st.inflight.iter().filter(|(_, f)| f.deadline <= now).map(|(k, _)| *k).collect();
-                for t in expired {
-                    if let Some(f) = st.inflight.remove(&t) {
-                        if let Some(w) = st.workers.get_mut(&f.worker) {
-                            w.assigned.remove(&t);
-                        }
-                        if st.run.is_pending(t.0, t.1) {
-                            tracing::info!(iteration = t.0, trial = t.1, worker = %f.worker, "lease expired; re-dispatching");
-                            st.queue.insert(t);
-                            st.counters.redispatched += 1;
-                        }
+                let t = st.sched.tick(Instant::now());
+                for (trial, worker) in t.expired {
+                    if st.run.is_pending(trial.0, trial.1) {
+                        tracing::info!(iteration = trial.0, trial = trial.1, %worker, "lease expired; re-dispatching");
+                        st.sched.enqueue(trial);
+                        st.counters.redispatched += 1;
                     }
                 }
-                let silence = st.cfg.silence;
-                let silent: Vec<String> = st.workers.iter().filter(|(_, w)| now.duration_since(w.last_seen) > silence * 4).map(|(k, _)| k.clone()).collect();
-                for id in silent {
+                for id in t.silent {
                     // Far past its heartbeat: treat as gone even if its token lingers.
                     st.requeue_worker(&id)?;
                 }
@@ -444,13 +407,7 @@ async fn on_outcome(
     events: Option<&tokio::sync::mpsc::UnboundedSender<Event>>,
 ) -> Result<(), ServiceError> {
     let t = (o.iteration, o.trial);
-    if let Some(w) = st.workers.get_mut(&o.worker) {
-        w.assigned.remove(&t);
-        w.last_seen = Instant::now();
-    }
-    if st.inflight.get(&t).is_some_and(|f| f.worker == o.worker) {
-        st.inflight.remove(&t);
-    }
+    st.sched.answered(t, &o.worker, Instant::now());
 
     match st
         .run
@@ -468,8 +425,7 @@ async fn on_outcome(
             st.ran_elsewhere(t, &o.worker);
             st.counters.accepted += 1;
             st.trials_done += 1;
-            st.queue.remove(&t);
-            st.inflight.remove(&t);
+            st.sched.forget(t);
             let prefix = st.cfg.prefix.clone();
             put_json(
                 session,
@@ -500,7 +456,7 @@ async fn handle_effects(
         match e {
             Effect::Dispatch(o, ks) => {
                 for k in ks {
-                    st.queue.insert((o.iteration, k));
+                    st.sched.enqueue((o.iteration, k));
                 }
                 let ev = st.run.evolve();
                 let json = serde_json::json!({
@@ -542,66 +498,24 @@ async fn handle_effects(
 }
 
 async fn dispatch(session: &Session, st: &mut State) {
-    let now = Instant::now();
-    let silence = st.cfg.silence;
-    let usable = |st: &State, id: &String, w: &WorkerInfo| {
-        now.duration_since(w.last_seen) <= silence && !st.counters.set_aside.contains(id)
-    };
-    let queued: Vec<(u64, u32)> = st.queue.iter().copied().collect();
-    for t in queued {
-        let free = st
-            .workers
-            .iter()
-            .any(|(id, w)| usable(st, id, w) && (w.assigned.len() as u64) < u64::from(w.slots));
-        if !free {
-            break;
-        }
+    let run = &st.run;
+    let sends = st
+        .sched
+        .dispatch(Instant::now(), &|t| run.failed_workers(t.0, t.1));
+    for (t, id) in sends {
         let Some(opened) = st.opened.get(&t.0) else {
-            st.queue.remove(&t);
+            st.sched.forget(t);
             continue;
         };
-        // A trial that failed somewhere waits for a live worker that has not
-        // failed it, when there is one; among the candidates, the one with the
-        // most free slots (ties: smallest id).
-        let failed = st.run.failed_workers(t.0, t.1);
-        let fresh_exists = st
-            .workers
-            .iter()
-            .any(|(id, w)| usable(st, id, w) && !failed.contains(id));
-        let pick = st
-            .workers
-            .iter()
-            .filter(|(id, w)| usable(st, id, w))
-            .filter(|(_, w)| (w.assigned.len() as u64) < u64::from(w.slots))
-            .filter(|(id, _)| !(fresh_exists && failed.contains(*id)))
-            .max_by_key(|(id, w)| {
-                (
-                    u64::from(w.slots) - w.assigned.len() as u64,
-                    std::cmp::Reverse((*id).clone()),
-                )
-            })
-            .map(|(id, _)| id.clone());
-        let Some(id) = pick else { continue };
         st.dispatch += 1;
         let req = match st.run.request(opened, t.1, st.dispatch) {
             Ok(r) => r,
             Err(e) => {
                 tracing::error!(error = %e, "a queued trial has no request; dropped");
-                st.queue.remove(&t);
+                st.sched.forget(t);
                 continue;
             }
         };
-        st.queue.remove(&t);
-        if let Some(w) = st.workers.get_mut(&id) {
-            w.assigned.insert(t);
-        }
-        st.inflight.insert(
-            t,
-            Inflight {
-                worker: id.clone(),
-                deadline: now + st.cfg.lease,
-            },
-        );
         if let Err(e) = session
             .put(keys::work(&st.cfg.prefix, &id), req.encode())
             .await

@@ -1,0 +1,242 @@
+//! Who runs which trial, and when a trial goes back to the queue: the
+//! coordinator service's scheduling as a pure part. The caller passes `now`
+//! (tokio's clock, so tests run it under `tokio::time::pause()`); nothing here
+//! reads a clock, sends a message or touches the journal.
+//!
+//! A trial is queued until a live worker with a free slot takes it; it is
+//! *in flight* on that worker until the worker answers, its lease passes
+//! ([`Scheduler::tick`]), or the worker goes (token dropped, or silent for
+//! four silence periods). Workers that failed a trial are avoided for it while
+//! another live worker exists; workers set aside get no work. Must not: decide
+//! whether an outcome counts (the run does) or block.
+
+use std::{
+    collections::{BTreeMap, BTreeSet, HashMap},
+    time::Duration,
+};
+
+use tokio::time::Instant;
+
+/// A trial: (iteration, trial index).
+pub type TrialId = (u64, u32);
+
+#[derive(Debug, Clone)]
+struct WorkerInfo {
+    slots: u32,
+    assigned: BTreeSet<TrialId>,
+    last_seen: Instant,
+}
+
+#[derive(Debug, Clone)]
+struct Inflight {
+    worker: String,
+    deadline: Instant,
+}
+
+/// What passing time did.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Tick {
+    /// Trials whose lease passed, with the worker that held them (re-queued
+    /// when the caller still wants them: [`Scheduler::enqueue`]).
+    pub expired: Vec<(TrialId, String)>,
+    /// Workers silent for four silence periods: the caller treats them as gone.
+    pub silent: Vec<String>,
+}
+
+/// The scheduling state of one run.
+#[derive(Debug, Clone)]
+pub struct Scheduler {
+    lease: Duration,
+    silence: Duration,
+    queue: BTreeSet<TrialId>,
+    inflight: HashMap<TrialId, Inflight>,
+    workers: BTreeMap<String, WorkerInfo>,
+    set_aside: BTreeSet<String>,
+}
+
+impl Scheduler {
+    /// A scheduler giving each dispatch `lease`, and work only to workers heard
+    /// from within `silence`.
+    #[must_use]
+    pub fn new(lease: Duration, silence: Duration) -> Self {
+        Self {
+            lease,
+            silence,
+            queue: BTreeSet::new(),
+            inflight: HashMap::new(),
+            workers: BTreeMap::new(),
+            set_aside: BTreeSet::new(),
+        }
+    }
+
+    /// A worker was heard from: its heartbeat (with its slots), or its
+    /// liveliness token (`None`: one slot until its first heartbeat).
+    pub fn worker_seen(&mut self, id: &str, slots: Option<u32>, now: Instant) {
+        let w = self
+            .workers
+            .entry(id.to_string())
+            .or_insert_with(|| WorkerInfo {
+                slots: 1,
+                assigned: BTreeSet::new(),
+                last_seen: now,
+            });
+        if let Some(s) = slots {
+            w.slots = s;
+        }
+        w.last_seen = now;
+    }
+
+    /// A worker is gone: returns the trials it held (no longer in flight).
+    pub fn worker_gone(&mut self, id: &str) -> Vec<TrialId> {
+        let Some(w) = self.workers.remove(id) else {
+            return Vec::new();
+        };
+        w.assigned
+            .into_iter()
+            .filter(|t| self.inflight.remove(t).is_some())
+            .collect()
+    }
+
+    /// Queues a trial to run (again).
+    pub fn enqueue(&mut self, t: TrialId) {
+        if !self.inflight.contains_key(&t) {
+            self.queue.insert(t);
+        }
+    }
+
+    /// The trial is done (decided or no longer wanted): off the queue and out of flight.
+    pub fn forget(&mut self, t: TrialId) {
+        self.queue.remove(&t);
+        if let Some(f) = self.inflight.remove(&t) {
+            if let Some(w) = self.workers.get_mut(&f.worker) {
+                w.assigned.remove(&t);
+            }
+        }
+    }
+
+    /// `by` answered trial `t` (an outcome or a failure): whether `by` held it.
+    /// Either way `by` was heard from and no longer holds `t`.
+    pub fn answered(&mut self, t: TrialId, by: &str, now: Instant) -> bool {
+        if let Some(w) = self.workers.get_mut(by) {
+            w.assigned.remove(&t);
+            w.last_seen = now;
+        }
+        let held = self.inflight.get(&t).is_some_and(|f| f.worker == by);
+        if held {
+            self.inflight.remove(&t);
+        }
+        held
+    }
+
+    /// Sets a worker aside: it gets no more work.
+    pub fn set_aside(&mut self, id: &str) {
+        self.set_aside.insert(id.to_string());
+    }
+
+    /// Expires leases and finds silent workers.
+    pub fn tick(&mut self, now: Instant) -> Tick {
+        let mut expired: Vec<(TrialId, String)> = self
+            .inflight
+            .iter()
+            .filter(|(_, f)| f.deadline <= now)
+            .map(|(t, f)| (*t, f.worker.clone()))
+            .collect();
+        expired.sort();
+        for (t, w) in &expired {
+            self.inflight.remove(t);
+            if let Some(w) = self.workers.get_mut(w) {
+                w.assigned.remove(t);
+            }
+        }
+        let silent = self
+            .workers
+            .iter()
+            .filter(|(_, w)| now.saturating_duration_since(w.last_seen) > self.silence * 4)
+            .map(|(id, _)| id.clone())
+            .collect();
+        Tick { expired, silent }
+    }
+
+    fn usable(&self, id: &str, w: &WorkerInfo, now: Instant) -> bool {
+        now.saturating_duration_since(w.last_seen) <= self.silence && !self.set_aside.contains(id)
+    }
+
+    /// Hands queued trials to live workers with free slots, most free slots
+    /// first (ties: smallest id). A trial that failed on some workers
+    /// (`failed(t)`) waits for another live worker while one exists. Returns
+    /// the (trial, worker) pairs to send; they are in flight until `now + lease`.
+    pub fn dispatch(
+        &mut self,
+        now: Instant,
+        failed: &dyn Fn(TrialId) -> BTreeSet<String>,
+    ) -> Vec<(TrialId, String)> {
+        let mut out = Vec::new();
+        let queued: Vec<TrialId> = self.queue.iter().copied().collect();
+        for t in queued {
+            let free = |s: &Self, id: &str, w: &WorkerInfo| {
+                s.usable(id, w, now) && (w.assigned.len() as u64) < u64::from(w.slots)
+            };
+            if !self.workers.iter().any(|(id, w)| free(self, id, w)) {
+                break;
+            }
+            let failed = failed(t);
+            let fresh_exists = self
+                .workers
+                .iter()
+                .any(|(id, w)| self.usable(id, w, now) && !failed.contains(id));
+            let pick = self
+                .workers
+                .iter()
+                .filter(|(id, w)| free(self, id, w))
+                .filter(|(id, _)| !(fresh_exists && failed.contains(*id)))
+                .max_by_key(|(id, w)| {
+                    (
+                        u64::from(w.slots) - w.assigned.len() as u64,
+                        std::cmp::Reverse((*id).clone()),
+                    )
+                })
+                .map(|(id, _)| id.clone());
+            let Some(id) = pick else { continue };
+            self.queue.remove(&t);
+            if let Some(w) = self.workers.get_mut(&id) {
+                w.assigned.insert(t);
+            }
+            self.inflight.insert(
+                t,
+                Inflight {
+                    worker: id.clone(),
+                    deadline: now + self.lease,
+                },
+            );
+            out.push((t, id));
+        }
+        out
+    }
+
+    /// Workers known (live or not yet swept).
+    #[must_use]
+    pub fn workers(&self) -> usize {
+        self.workers.len()
+    }
+
+    /// Trials held by `id`.
+    #[must_use]
+    pub fn held_by(&self, id: &str) -> usize {
+        self.workers.get(id).map_or(0, |w| w.assigned.len())
+    }
+
+    /// Whether `t` is queued.
+    #[must_use]
+    pub fn is_queued(&self, t: TrialId) -> bool {
+        self.queue.contains(&t)
+    }
+
+    /// The worker `t` is in flight on.
+    #[must_use]
+    pub fn holder(&self, t: TrialId) -> Option<&str> {
+        self.inflight.get(&t).map(|f| f.worker.as_str())
+    }
+}
+
+#[cfg(test)]
+mod tests;
