@@ -3,7 +3,7 @@
 
 use anyhow::anyhow;
 use clap::Args;
-use coordinator::{
+use tools::{
     bench::{self, Algorithm},
     problems::Problem,
 };

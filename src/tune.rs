@@ -1,14 +1,12 @@
 //! `naofarm clop`: arguments and output of the local tuning command
-//! ([`coordinator::tune`] plays the games).
+//! ([`tools::tune`] plays the games).
 
 use std::{path::PathBuf, time::Duration};
 
 use anyhow::anyhow;
 use clap::Args;
-use coordinator::{
-    clop::Clop,
-    tune::{parse_param, tune, Games, TuneError, Tuning},
-};
+use coordinator::clop::Clop;
+use tools::tune::{parse_param, tune, Games, TuneError, Tuning};
 
 use crate::cli::Failure;
 
@@ -50,8 +48,8 @@ pub fn clop(a: &ClopArgs) -> Result<(), Failure> {
         .params
         .iter()
         .map(|s| parse_param(s))
-        .collect::<anyhow::Result<Vec<_>>>()
-        .map_err(Failure::Usage)?;
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| Failure::Usage(anyhow!("{e}")))?;
     if !(a.timeout_s.is_finite() && a.timeout_s > 0.0 && a.timeout_s < 1e9) {
         return Err(Failure::Usage(anyhow!(
             "--timeout-s must be a positive number of seconds"
@@ -77,8 +75,8 @@ pub fn clop(a: &ClopArgs) -> Result<(), Failure> {
     };
     let names: Vec<String> = job.params.iter().map(|p| p.name.clone()).collect();
     let clop = tune(&job).map_err(|e| match e {
-        TuneError::Bad(e) => Failure::Usage(e),
-        TuneError::Failed(e) => Failure::Job(e),
+        TuneError::Bad(e) => Failure::Usage(anyhow!("{e}")),
+        TuneError::Failed(e) => Failure::Job(anyhow!("{e}")),
     })?;
     report(&clop, &names, a.json)
 }

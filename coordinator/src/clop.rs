@@ -601,7 +601,29 @@ impl Clop {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::problems::Problem;
+
+    /// Two of `docs/spec/clop.md` §11's problems (the full set is in naofarm-tools).
+    enum Problem {
+        Log,
+        Rosenbrock,
+    }
+
+    impl Problem {
+        fn f(&self, u: &[f64]) -> f64 {
+            let g = match self {
+                Self::Log => {
+                    let t = 2.0 * u[0] + 1.0;
+                    2.0 * (2.0 * t + 2.1).ln() - 2.0 * t - 1.0
+                }
+                Self::Rosenbrock => {
+                    let a = 4.0 * u[0];
+                    let b = 10.0 * u[1] + 4.0;
+                    1.0 - 0.1 * ((1.0 - a).powi(2) + (b - a * a).powi(2))
+                }
+            };
+            1.0 / (1.0 + (-g).exp())
+        }
+    }
 
     fn settings() -> ClopSettings {
         ClopSettings::default()

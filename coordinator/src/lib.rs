@@ -1,24 +1,24 @@
-//! The coordinator: CLOP, pickOut and the evolving loop as pure state
-//! machines, the durable journal, and the zenoh dispatch that drives them.
+//! The coordinator of a run, in three layers that only depend downwards:
 //!
-//! Modules: [`clop`] (the optimiser, ask/tell), [`problems`] (CLOP's artificial
-//! test problems), [`bench`] (the CLOP benchmark harness), [`cmaes`] (its
-//! CMA-ES baseline), [`tune`] (local tuning of any noisy program with CLOP:
-//! evaluator processes and a replayable log).
+//! - **core** (pure: no I/O, no clock, no unseeded randomness): [`clop`] (the
+//!   optimiser, ask/tell) and [`evolve`] (Algorithm 1 as a state machine over
+//!   `protocol::pickout`);
+//! - **durable state**: [`journal`] (the append-only, checksummed journal and
+//!   its damage rules), [`lock`] (one coordinator per run directory), [`run`]
+//!   (a run on disk: create, resume, extend, salvage, replay a farm trial);
+//! - **transport**: [`schedule`] (who runs which trial, leases and liveness, a
+//!   pure part under the caller's clock) and [`service`] (the zenoh loop that
+//!   moves messages between workers, watchers and the run).
 //!
-//! The optimiser and the loop must not do I/O, read a clock or draw from an
-//! unseeded random stream; side effects (journal, publishing, progress) hang
-//! off them as sinks.
+//! Tooling around CLOP (benchmarks, baselines, local tuning) lives in
+//! `naofarm-tools`, not here. This crate must not print, exit or parse
+//! command lines, and its core must not read a clock or do I/O.
 #![warn(missing_docs)]
 
-pub mod bench;
 pub mod clop;
-pub mod cmaes;
 pub mod evolve;
 pub mod journal;
 pub mod lock;
-pub mod problems;
 pub mod run;
 pub mod schedule;
 pub mod service;
-pub mod tune;

@@ -3,7 +3,10 @@
 //! and the zenoh key expressions they travel on.
 //!
 //! Modules: [`experiment`] (TOML experiment files and their validation),
-//! [`params`] (the known parameter names and their admissible ranges),
+//! [`params`] (the one parameter registry: names, roles, units, admissible
+//! ranges, expert values; named values decoded once), [`seed`] (every random
+//! stream from the run seed, iteration and trial), [`measurement`] (what one
+//! trial measured), [`pickout`] (iteration statistics, pickOut, ν′ and H),
 //! [`wire`] (versioned bincode envelope, one encode/decode per message),
 //! [`keys`] (every key expression naofarm uses).
 //!

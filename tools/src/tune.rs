@@ -3,7 +3,7 @@
 //! process per game (CLOP's classic contract); an optional JSON-lines log of
 //! every game is replayed on restart so that a resumed tuning asks exactly
 //! what an uninterrupted one would. This module does I/O (child processes, the
-//! log file); the optimiser it drives ([`crate::clop`]) stays pure.
+//! log file); the optimiser it drives ([`coordinator::clop`]) stays pure.
 
 use std::{
     io::{BufRead, BufReader, Write},
@@ -13,13 +13,51 @@ use std::{
     time::Duration,
 };
 
-use crate::{
-    clop::{Clop, Dim, Outcome},
-    evolve::mix,
-};
-use anyhow::{anyhow, bail, Context};
+use coordinator::clop::{Clop, Dim, Outcome};
 use protocol::experiment::{ClopSettings, ParamKind};
+use protocol::seed::mix;
 use serde::{Deserialize, Serialize};
+
+/// What went wrong, with the context it happened in (outermost first).
+#[derive(Debug)]
+pub struct Message(String);
+
+impl std::fmt::Display for Message {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl<E: std::error::Error> From<E> for Message {
+    fn from(e: E) -> Self {
+        Self(e.to_string())
+    }
+}
+
+type Result<T, E = Message> = std::result::Result<T, E>;
+
+macro_rules! msg {
+    ($($t:tt)*) => {
+        Message(format!($($t)*))
+    };
+}
+
+macro_rules! bail {
+    ($($t:tt)*) => {
+        return Err(msg!($($t)*))
+    };
+}
+
+/// Adds what was being done to an error.
+trait Context<T> {
+    fn with_context(self, what: impl FnOnce() -> String) -> Result<T>;
+}
+
+impl<T, E: Into<Message>> Context<T> for std::result::Result<T, E> {
+    fn with_context(self, what: impl FnOnce() -> String) -> Result<T> {
+        self.map_err(|e| Message(format!("{}: {}", what(), e.into())))
+    }
+}
 
 /// One tuned parameter: `NAME:KIND:LO:HI` on the command line.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -35,7 +73,7 @@ pub struct Param {
 }
 
 /// Parses `NAME:KIND:LO:HI` (KIND: linear, integer, gamma, integer_gamma).
-pub fn parse_param(s: &str) -> anyhow::Result<Param> {
+pub fn parse_param(s: &str) -> Result<Param> {
     let parts: Vec<&str> = s.split(':').collect();
     let [name, kind, lo, hi] = parts.as_slice() else {
         bail!("--param `{s}`: expected NAME:KIND:LO:HI");
@@ -50,10 +88,10 @@ pub fn parse_param(s: &str) -> anyhow::Result<Param> {
         "integer_gamma" => ParamKind::IntegerGamma,
         k => bail!("--param `{s}`: unknown kind `{k}` (linear, integer, gamma, integer_gamma)"),
     };
-    let num = |what: &str, v: &str| -> anyhow::Result<f64> {
+    let num = |what: &str, v: &str| -> Result<f64> {
         let x: f64 = v
             .parse()
-            .map_err(|_| anyhow!("--param `{s}`: {what} `{v}` is not a number"))?;
+            .map_err(|_| msg!("--param `{s}`: {what} `{v}` is not a number"))?;
         if !x.is_finite() {
             bail!("--param `{s}`: {what} must be finite");
         }
@@ -111,7 +149,7 @@ fn outcome(answer: &str) -> Option<(Outcome, char)> {
 
 /// Opens (or creates) the log, replays its games into `clop`; returns the
 /// file for appending and the number of games replayed.
-fn open_log(path: &Path, header: &Header, clop: &mut Clop) -> anyhow::Result<(std::fs::File, u64)> {
+fn open_log(path: &Path, header: &Header, clop: &mut Clop) -> Result<(std::fs::File, u64)> {
     let text = match std::fs::read_to_string(path) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
@@ -235,21 +273,18 @@ fn line_reader(out: impl std::io::Read + Send + 'static) -> mpsc::Receiver<Strin
 }
 
 impl Evaluator {
-    fn start(how: &Games) -> anyhow::Result<Self> {
+    fn start(how: &Games) -> Result<Self> {
         if let Games::Lines(cmd) = how {
             let mut child = shell(cmd)
                 .stdin(Stdio::piped())
                 .stdout(Stdio::piped())
                 .spawn()
                 .with_context(|| format!("cannot start the evaluator `{cmd}`"))?;
-            let stdin = child
-                .stdin
-                .take()
-                .ok_or_else(|| anyhow!("evaluator stdin"))?;
+            let stdin = child.stdin.take().ok_or_else(|| msg!("evaluator stdin"))?;
             let stdout = child
                 .stdout
                 .take()
-                .ok_or_else(|| anyhow!("evaluator stdout"))?;
+                .ok_or_else(|| msg!("evaluator stdout"))?;
             Ok(Self::Lines {
                 child,
                 stdin,
@@ -269,7 +304,7 @@ impl Evaluator {
         names: &[String],
         values: &[f64],
         timeout: Duration,
-    ) -> anyhow::Result<(Outcome, char)> {
+    ) -> Result<(Outcome, char)> {
         match self {
             Self::Lines {
                 child,
@@ -289,9 +324,7 @@ impl Evaluator {
                 }
                 match answers.recv_timeout(timeout) {
                     Ok(answer) => outcome(&answer).ok_or_else(|| {
-                        anyhow!(
-                            "the evaluator answered `{answer}` to game {game}; expected W, D or L"
-                        )
+                        msg!("the evaluator answered `{answer}` to game {game}; expected W, D or L")
                     }),
                     Err(mpsc::RecvTimeoutError::Timeout) => {
                         kill_group(child);
@@ -319,10 +352,7 @@ impl Evaluator {
                     .stdout(Stdio::piped())
                     .spawn()
                     .with_context(|| format!("cannot start the script `{script}`"))?;
-                let stdout = child
-                    .stdout
-                    .take()
-                    .ok_or_else(|| anyhow!("script stdout"))?;
+                let stdout = child.stdout.take().ok_or_else(|| msg!("script stdout"))?;
                 let lines = line_reader(stdout);
                 let deadline = std::time::Instant::now() + timeout;
                 let mut last = None;
@@ -344,7 +374,7 @@ impl Evaluator {
                 let status = child.wait()?;
                 let last = last.unwrap_or_default();
                 outcome(&last).ok_or_else(|| {
-                    anyhow!("the script's last line for game {game} is `{last}` ({status}); expected W, L or D")
+                    msg!("the script's last line for game {game} is `{last}` ({status}); expected W, L or D")
                 })
             }
         }
@@ -391,17 +421,17 @@ pub struct Tuning {
 #[derive(Debug, thiserror::Error)]
 pub enum TuneError {
     /// The job itself is malformed (parameters, log of other parameters…).
-    #[error("{0:#}")]
-    Bad(anyhow::Error),
+    #[error("{0}")]
+    Bad(Message),
     /// Games failed (the evaluator died, hung or answered nonsense); the log keeps those played.
-    #[error("{0:#}")]
-    Failed(anyhow::Error),
+    #[error("{0}")]
+    Failed(Message),
 }
 
 /// Plays the tuning to its budget; returns the optimiser (its `mean`, `max`
 /// and `counts` are the answer).
 pub fn tune(t: &Tuning) -> Result<Clop, TuneError> {
-    let bad = |m: String| TuneError::Bad(anyhow!(m));
+    let bad = |m: String| TuneError::Bad(Message(m));
     for (i, p) in t.params.iter().enumerate() {
         if t.params[..i].iter().any(|q| q.name == p.name) {
             return Err(bad(format!("--param `{}` is given twice", p.name)));
@@ -449,7 +479,7 @@ pub fn tune(t: &Tuning) -> Result<Clop, TuneError> {
         None => (None, 0),
     };
     let names: Vec<String> = t.params.iter().map(|p| p.name.clone()).collect();
-    let result = (|| -> anyhow::Result<()> {
+    let result = (|| -> Result<()> {
         if played >= t.budget {
             return Ok(());
         }
@@ -481,9 +511,7 @@ pub fn tune(t: &Tuning) -> Result<Clop, TuneError> {
             .as_ref()
             .map(|p| format!("; the {played} games played are in {}", p.display()))
             .unwrap_or_default();
-        return Err(TuneError::Failed(
-            e.context(format!("after {played} games{kept}")),
-        ));
+        return Err(TuneError::Failed(msg!("after {played} games{kept}: {e}")));
     }
     Ok(clop)
 }

@@ -8,11 +8,10 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
-use crate::{
-    clop::{Clop, Dim, Outcome},
-    evolve::mix,
-    problems::Problem,
-};
+use coordinator::clop::{Clop, Dim, Outcome};
+use protocol::seed::mix;
+
+use crate::problems::Problem;
 
 /// An optimiser under test.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
