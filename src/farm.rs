@@ -12,7 +12,7 @@ use protocol::{experiment::TrialModel, wire::RunStatus};
 
 use crate::{
     cli::{load_experiment, Failure, JobArgs},
-    net::{free_loopback_port, NetArgs},
+    net::{free_loopback_port, open_session, NetArgs},
     view::View,
 };
 
@@ -216,26 +216,41 @@ pub fn coordinator(job: &JobArgs, net: &NetArgs, json: bool) -> Result<(), Failu
     let (run, effects) = open_run(job)?;
     let rt = runtime()?;
     rt.block_on(async {
-        let session = zenoh::open(cfg)
-            .await
-            .map_err(|e| Failure::Job(anyhow!("zenoh: {e}")))?;
+        let session = open_session(cfg).await?;
         let shutdown = signals();
-        let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
-        let printer = spawn_view(json, rx);
-        let ended = service::serve(
-            session.clone(),
-            run,
-            effects,
-            service_config(job, &net.prefix),
-            shutdown,
-            Some(tx),
-        )
-        .await
-        .map_err(|e| Failure::Job(e.into()))?;
-        let view = printer.await.ok();
+        let served =
+            serve_with_view(&session, (run, effects), job, &net.prefix, shutdown, json).await;
         let _ = session.close().await;
-        summary(&job.out, &ended, view)
+        let (ended, view) = served;
+        summary(&job.out, &ended.map_err(|e| Failure::Job(e.into()))?, view)
     })
+}
+
+/// Serves the run on `session`, its events shown in a [`View`]; returns how it
+/// ended and the view with the last status.
+async fn serve_with_view(
+    session: &zenoh::Session,
+    (run, effects): (Run, Vec<coordinator::run::Effect>),
+    job: &JobArgs,
+    prefix: &str,
+    shutdown: tokio::sync::watch::Receiver<bool>,
+    json: bool,
+) -> (
+    Result<Ended, service::ServiceError>,
+    Option<(View, Option<RunStatus>)>,
+) {
+    let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
+    let printer = spawn_view(json, rx);
+    let ended = service::serve(
+        session.clone(),
+        run,
+        effects,
+        service_config(job, prefix),
+        shutdown,
+        Some(tx),
+    )
+    .await;
+    (ended, printer.await.ok())
 }
 
 /// `naofarm worker`.
@@ -259,9 +274,7 @@ pub fn worker(net: &NetArgs, slots: Option<u32>, min_trial_ms: u64) -> Result<()
     }
     let rt = runtime()?;
     rt.block_on(async {
-        let session = zenoh::open(cfg)
-            .await
-            .map_err(|e| Failure::Job(anyhow!("zenoh: {e}")))?;
+        let session = open_session(cfg).await?;
         let shutdown = signals();
         let s = worker::service::serve(session.clone(), wcfg, shutdown)
             .await
@@ -321,17 +334,13 @@ pub fn run(
     let (run, effects) = open_run(job)?;
     let rt = runtime()?;
     rt.block_on(async {
-        let session = zenoh::open(ccfg)
-            .await
-            .map_err(|e| Failure::Job(anyhow!("zenoh: {e}")))?;
+        let session = open_session(ccfg).await?;
         let shutdown = signals();
         let mut handles = Vec::new();
         let mut worker_sessions = Vec::new();
         for _ in 0..n {
             let wcfg = worker_net.zenoh_config(&[]).map_err(Failure::Job)?;
-            let ws = zenoh::open(wcfg)
-                .await
-                .map_err(|e| Failure::Job(anyhow!("zenoh: {e}")))?;
+            let ws = open_session(wcfg).await?;
             worker_sessions.push(ws.clone());
             let cfg = worker::service::WorkerConfig {
                 slots: 1,
@@ -343,18 +352,15 @@ pub fn run(
                 shutdown.clone(),
             )));
         }
-        let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
-        let printer = spawn_view(json, rx);
-        let ended = service::serve(
-            session.clone(),
-            run,
-            effects,
-            service_config(job, protocol::keys::DEFAULT_PREFIX),
+        let (ended, view) = serve_with_view(
+            &session,
+            (run, effects),
+            job,
+            protocol::keys::DEFAULT_PREFIX,
             shutdown,
-            Some(tx),
+            json,
         )
         .await;
-        let view = printer.await.ok();
         for ws in &worker_sessions {
             let _ = ws.close().await;
         }

@@ -65,3 +65,10 @@ pub fn free_loopback_port() -> anyhow::Result<u16> {
     let l = std::net::TcpListener::bind("127.0.0.1:0").context("bind 127.0.0.1:0")?;
     Ok(l.local_addr()?.port())
 }
+
+/// Opens a zenoh session (the one place every command does).
+pub async fn open_session(cfg: zenoh::Config) -> Result<zenoh::Session, crate::cli::Failure> {
+    zenoh::open(cfg)
+        .await
+        .map_err(|e| crate::cli::Failure::Job(anyhow::anyhow!("zenoh: {e}")))
+}

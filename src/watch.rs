@@ -88,7 +88,7 @@ pub fn watch(a: &WatchArgs) -> Result<(), Failure> {
         .build()
         .map_err(|e| Failure::Job(e.into()))?;
     rt.block_on(async {
-        let session = zenoh::open(cfg).await.map_err(zerr)?;
+        let session = crate::net::open_session(cfg).await?;
         let deadline = Instant::now() + Duration::from_secs_f64(a.timeout_s);
         let r = match &a.run {
             None => list(&session, &net, deadline, a.json).await,

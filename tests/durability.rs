@@ -24,6 +24,37 @@ fn run(out: &Path, iterations: u64) -> std::process::Command {
     c
 }
 
+/// An uninterrupted run of `iterations` in `dir/reference`: its directory and history.
+fn reference_run(dir: &Path, iterations: u64) -> (PathBuf, Vec<u8>) {
+    let reference = dir.join("reference");
+    succeed(&mut run(&reference, iterations));
+    let want = history(&reference);
+    (reference, want)
+}
+
+/// `naofarm run` of the experiment file `exp` on the synthetic model with one worker.
+fn run_synthetic(
+    exp: impl AsRef<std::ffi::OsStr>,
+    out: impl AsRef<std::ffi::OsStr>,
+    iterations: u64,
+) -> std::process::Command {
+    let mut c = naofarm();
+    c.args([
+        "run",
+        "--json",
+        "--workers",
+        "1",
+        "--model",
+        "synthetic",
+        "--iterations",
+    ])
+    .arg(iterations.to_string())
+    .arg(exp)
+    .arg("--out")
+    .arg(out);
+    c
+}
+
 fn history(dir: &Path) -> Vec<u8> {
     succeed(naofarm().arg("history").arg(dir).arg("--csv")).stdout
 }
@@ -42,9 +73,7 @@ fn frames(bytes: &[u8]) -> Vec<usize> {
 #[test]
 fn a_flipped_length_bit_is_refused_everywhere_and_salvage_recovers_the_run() {
     let dir = scratch("flip");
-    let reference = dir.join("reference");
-    succeed(&mut run(&reference, 12));
-    let want = history(&reference);
+    let (reference, want) = reference_run(&dir, 12);
     let bytes = std::fs::read(journal(&reference)).unwrap();
     let third = frames(&bytes)[2];
     let damaged_dir = dir.join("damaged");
@@ -97,9 +126,7 @@ fn a_flipped_length_bit_is_refused_everywhere_and_salvage_recovers_the_run() {
 #[test]
 fn a_zero_filled_tail_is_saved_aside_and_the_run_resumes() {
     let dir = scratch("zeros");
-    let reference = dir.join("reference");
-    succeed(&mut run(&reference, 10));
-    let want = history(&reference);
+    let (reference, want) = reference_run(&dir, 10);
     let bytes = std::fs::read(journal(&reference)).unwrap();
     // A crash after 5 decisions' worth of records, leaving zeros where the next append was.
     let cut = frames(&bytes)[bytes.len() / 2 % frames(&bytes).len()];
@@ -123,9 +150,7 @@ fn a_zero_filled_tail_is_saved_aside_and_the_run_resumes() {
 #[test]
 fn a_full_disk_stops_the_run_with_nothing_half_applied_and_it_resumes() {
     let dir = scratch("full");
-    let reference = dir.join("reference");
-    succeed(&mut run(&reference, 8));
-    let want = history(&reference);
+    let (reference, want) = reference_run(&dir, 8);
     let out = dir.join("run");
     let limit = std::fs::metadata(journal(&reference)).unwrap().len() / 2;
     let err = fails(
@@ -174,38 +199,19 @@ fn extending_a_finished_run_gives_the_longer_runs_history() {
 fn from_a_run_with_other_parameters_is_refused_by_name() {
     let dir = scratch("from");
     let one = dir.join("physical");
-    succeed(
-        naofarm()
-            .args([
-                "run",
-                "--json",
-                "--workers",
-                "1",
-                "--iterations",
-                "3",
-                "--model",
-                "synthetic",
-            ])
-            .arg(root().join("experiments/physical.toml"))
-            .arg("--out")
-            .arg(&one),
-    );
+    succeed(&mut run_synthetic(
+        root().join("experiments/physical.toml"),
+        &one,
+        3,
+    ));
     let err = fails(
-        naofarm()
-            .args([
-                "run",
-                "--workers",
-                "1",
-                "--iterations",
-                "2",
-                "--model",
-                "synthetic",
-            ])
-            .arg(root().join("experiments/physical-technical.toml"))
-            .arg("--out")
-            .arg(dir.join("five"))
-            .arg("--from")
-            .arg(&one),
+        run_synthetic(
+            root().join("experiments/physical-technical.toml"),
+            dir.join("five"),
+            2,
+        )
+        .arg("--from")
+        .arg(&one),
         2,
     );
     assert!(
@@ -220,20 +226,7 @@ fn from_a_run_with_other_parameters_is_refused_by_name() {
     let narrow = dir.join("narrow.toml");
     std::fs::write(&narrow, text).unwrap();
     let out = succeed(
-        naofarm()
-            .args([
-                "run",
-                "--json",
-                "--workers",
-                "1",
-                "--iterations",
-                "2",
-                "--model",
-                "synthetic",
-            ])
-            .arg(&narrow)
-            .arg("--out")
-            .arg(dir.join("narrow"))
+        run_synthetic(&narrow, dir.join("narrow"), 2)
             .arg("--from")
             .arg(&one),
     );
@@ -286,9 +279,7 @@ fn absurd_numbers_are_usage_errors_never_panics() {
 #[test]
 fn a_trial_that_fails_on_every_worker_stops_the_run_with_the_reasons() {
     let dir = scratch("fails");
-    let reference = dir.join("reference");
-    succeed(&mut run(&reference, 8));
-    let want = history(&reference);
+    let (_, want) = reference_run(&dir, 8);
     for (mode, says) in [
         ("fail", "fails"),
         ("panic", "panic: fault hook"),

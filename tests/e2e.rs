@@ -108,33 +108,13 @@ mod farm {
     const TIMEOUT: Duration = Duration::from_secs(120);
 
     fn experiment(dir: &Path, iterations: u64) -> PathBuf {
-        let text = format!(
-            r#"
-name = "farm"
-seed = 5
-iterations = {iterations}
-trials_per_iteration = 6
-pipeline_depth = 3
-model = "synthetic"
-start = "expert"
-
-[[parameter]]
-name = "ThighRelHip2_Z"
-lower = -0.08
-upper = -0.03
-expert = -0.04
-
-[[parameter]]
-name = "xlength_step_max"
-lower = 0.02
-upper = 0.15
-expert = 0.08
-
-[clop]
-draw_elo = 100.0
-n_mcmc = 100
-"#
-        );
+        let text =
+            std::fs::read_to_string(super::root().join("experiments/test/two-parameters.toml"))
+                .unwrap()
+                .replace("name = \"syn\"", "name = \"farm\"")
+                .replace("seed = 42", "seed = 5")
+                .replace("iterations = 40", &format!("iterations = {iterations}"))
+                .replace("n_mcmc = 200", "n_mcmc = 100");
         let p = dir.join("exp.toml");
         std::fs::write(&p, text).unwrap();
         p

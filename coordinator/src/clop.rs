@@ -623,10 +623,37 @@ mod tests {
             };
             1.0 / (1.0 + (-g).exp())
         }
+
+        /// Plays `n` games drawn from `seed`: a win with probability f(u).
+        fn play(&self, c: &mut Clop, seed: u64, n: u64) {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            for i in 0..n {
+                let u = c.ask(i);
+                let o = if rng.random::<f64>() < self.f(&u) {
+                    Outcome::Win
+                } else {
+                    Outcome::Loss
+                };
+                c.tell(&u, o);
+            }
+        }
     }
 
     fn settings() -> ClopSettings {
         ClopSettings::default()
+    }
+
+    /// Asks and tells `n` games, a loss every `k`-th, a win otherwise.
+    fn feed(c: &mut Clop, n: u64, k: u64) {
+        for i in 0..n {
+            let u = c.ask(i);
+            let o = if i % k == 0 {
+                Outcome::Loss
+            } else {
+                Outcome::Win
+            };
+            c.tell(&u, o);
+        }
     }
 
     #[test]
@@ -709,17 +736,7 @@ mod tests {
     #[test]
     fn weights_drop_below_the_mean_and_stay_one_above() {
         let mut c = Clop::new(vec![Dim::linear(0.0, 1.0)], settings());
-        let p = Problem::Log;
-        let mut rng = ChaCha8Rng::seed_from_u64(3);
-        for i in 0..2000 {
-            let u = c.ask(i);
-            let o = if rng.random::<f64>() < p.f(&u) {
-                Outcome::Win
-            } else {
-                Outcome::Loss
-            };
-            c.tell(&u, o);
-        }
+        Problem::Log.play(&mut c, 3, 2000);
         c.refresh();
         assert!(c.n_terms() > 0);
         assert_eq!(c.weight(&[-0.525]), 1.0, "the optimum keeps full weight");
@@ -739,17 +756,7 @@ mod tests {
                 vec![Dim::linear(0.0, 1.0), Dim::linear(0.0, 1.0)],
                 settings(),
             );
-            let p = Problem::Rosenbrock;
-            let mut rng = ChaCha8Rng::seed_from_u64(11);
-            for i in 0..300 {
-                let u = c.ask(i);
-                let o = if rng.random::<f64>() < p.f(&u) {
-                    Outcome::Win
-                } else {
-                    Outcome::Loss
-                };
-                c.tell(&u, o);
-            }
+            Problem::Rosenbrock.play(&mut c, 11, 300);
             c.mean()
         };
         let a: Vec<u64> = run().iter().map(|x| x.to_bits()).collect();
@@ -760,17 +767,7 @@ mod tests {
     #[test]
     fn recommending_does_not_change_the_state() {
         let mut c = Clop::new(vec![Dim::linear(0.0, 1.0)], settings());
-        for i in 0..40 {
-            let u = c.ask(i);
-            c.tell(
-                &u,
-                if i % 3 == 0 {
-                    Outcome::Loss
-                } else {
-                    Outcome::Win
-                },
-            );
-        }
+        feed(&mut c, 40, 3);
         let before = c.clone();
         let _ = c.mean();
         let _ = c.max();
@@ -837,17 +834,7 @@ mod tests {
     #[test]
     fn state_serialises() {
         let mut c = Clop::new(vec![Dim::linear(0.0, 1.0)], settings());
-        for i in 0..30 {
-            let u = c.ask(i);
-            c.tell(
-                &u,
-                if i % 2 == 0 {
-                    Outcome::Loss
-                } else {
-                    Outcome::Win
-                },
-            );
-        }
+        feed(&mut c, 30, 2);
         let bytes = bincode::serde::encode_to_vec(&c, bincode::config::standard()).unwrap();
         let (mut back, _): (Clop, usize) =
             bincode::serde::decode_from_slice(&bytes, bincode::config::standard()).unwrap();

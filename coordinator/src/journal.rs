@@ -484,12 +484,7 @@ impl Journal {
 
     /// Reads a run directory's journal without changing anything.
     pub fn read(dir: &Path) -> Result<Scan, JournalError> {
-        let path = Self::path_in(dir);
-        let bytes = std::fs::read(&path).map_err(|cause| JournalError::Io {
-            path: path.clone(),
-            cause,
-        })?;
-        scan(&path, &bytes)
+        scan_file(&Self::path_in(dir))
     }
 
     /// Creates a new journal (the file must not exist) with its header record.
@@ -677,21 +672,6 @@ pub fn scan_file(path: &Path) -> Result<Scan, JournalError> {
         cause,
     })?;
     scan(path, &bytes)
-}
-
-/// Writes `records` as a new format-2 journal in `dir` (which must hold none).
-pub fn write_new_journal(dir: &Path, records: &[&Record]) -> Result<(), JournalError> {
-    let path = Journal::path_in(dir);
-    let io = |cause| JournalError::Io {
-        path: path.clone(),
-        cause,
-    };
-    std::fs::create_dir_all(dir).map_err(io)?;
-    let mut bytes = file_header();
-    for r in records {
-        encode_frame(r, &mut bytes).map_err(|e| io(std::io::Error::other(e)))?;
-    }
-    write_new(&path, &bytes).map_err(io)
 }
 
 /// Test support: the format-1 encoding of records (the format before 0.2).

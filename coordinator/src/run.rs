@@ -889,31 +889,7 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
 
-    const EXP: &str = r#"
-name = "syn"
-seed = 42
-iterations = 40
-trials_per_iteration = 6
-pipeline_depth = 3
-model = "synthetic"
-start = "expert"
-
-[[parameter]]
-name = "ThighRelHip2_Z"
-lower = -0.08
-upper = -0.03
-expert = -0.04
-
-[[parameter]]
-name = "xlength_step_max"
-lower = 0.02
-upper = 0.15
-expert = 0.08
-
-[clop]
-draw_elo = 100.0
-n_mcmc = 200
-"#;
+    const EXP: &str = include_str!("../../experiments/test/two-parameters.toml");
 
     fn exp() -> Experiment {
         Experiment::from_toml(EXP).unwrap()

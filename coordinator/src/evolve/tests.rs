@@ -2,27 +2,15 @@
 
 use super::*;
 
-const EXP: &str = r#"
-name = "ev"
-seed = 3
-iterations = 12
-trials_per_iteration = 3
-pipeline_depth = 2
-model = "synthetic"
-start = "expert"
-
-[[parameter]]
-name = "ThighRelHip2_Z"
-lower = -0.08
-upper = -0.03
-expert = -0.04
-
-[clop]
-n_mcmc = 50
-"#;
+const EXP: &str = include_str!("../../../experiments/test/two-parameters.toml");
 
 fn exp() -> Experiment {
-    Experiment::from_toml(EXP).expect("the test experiment parses")
+    let text = EXP
+        .replace("seed = 42", "seed = 3")
+        .replace("iterations = 40", "iterations = 12")
+        .replace("trials_per_iteration = 6", "trials_per_iteration = 3")
+        .replace("pipeline_depth = 3", "pipeline_depth = 2");
+    Experiment::from_toml(&text).expect("the test experiment parses")
 }
 
 /// A measurement that depends on the parameter and the seed only.
