@@ -102,7 +102,7 @@ mod farm {
         journal::{Journal, Record},
     };
 
-    use super::{naofarm, scratch, succeed};
+    use super::{naofarm, scratch, succeed, util::Proc};
     // `events` parses the JSON lines of run, coordinator and watch.
 
     const TIMEOUT: Duration = Duration::from_secs(120);
@@ -130,20 +130,23 @@ mod farm {
 
     struct Coordinator {
         child: Child,
+        stderr: PathBuf,
         lines: mpsc::Receiver<String>,
         seen: Vec<String>,
     }
 
     impl Coordinator {
         fn start(exp: &Path, out: &Path, port: u16, lease_s: f64) -> Self {
+            let stderr = out.with_extension("stderr");
             let mut child = naofarm()
                 .args(["coordinator", "--json", "--lease-s", &lease_s.to_string()])
                 .arg(exp)
                 .arg("--out")
                 .arg(out)
                 .args(["--listen", &format!("tcp/127.0.0.1:{port}")])
+                .env("RUST_LOG", "warn,naofarm_coordinator::service=info")
                 .stdout(Stdio::piped())
-                .stderr(std::fs::File::create(out.with_extension("stderr")).unwrap())
+                .stderr(std::fs::File::create(&stderr).unwrap())
                 .spawn()
                 .unwrap();
             let stdout = child.stdout.take().unwrap();
@@ -157,6 +160,7 @@ mod farm {
             });
             Self {
                 child,
+                stderr,
                 lines,
                 seen: Vec::new(),
             }
@@ -179,6 +183,29 @@ mod farm {
             }
         }
 
+        /// Its final counters (the `finished` JSON line), once it has exited.
+        fn finished(&self) -> serde_json::Value {
+            self.seen
+                .iter()
+                .find(|l| l.contains("\"event\":\"finished\""))
+                .map(|l| serde_json::from_str(l).unwrap())
+                .unwrap_or_else(|| panic!("no finished line in {:?}", self.seen))
+        }
+
+        /// Waits until its log (info level for the service) says `needle`.
+        fn wait_log(&self, needle: &str) {
+            let deadline = Instant::now() + TIMEOUT;
+            while !plain(&std::fs::read_to_string(&self.stderr).unwrap_or_default())
+                .contains(needle)
+            {
+                assert!(
+                    Instant::now() < deadline,
+                    "the coordinator never logged `{needle}`"
+                );
+                std::thread::sleep(Duration::from_millis(10));
+            }
+        }
+
         fn wait_exit(&mut self) -> std::process::ExitStatus {
             let deadline = Instant::now() + TIMEOUT;
             loop {
@@ -198,19 +225,89 @@ mod farm {
         }
     }
 
-    fn worker(port: u16, slots: u32, pace_ms: u64) -> Child {
-        naofarm()
-            .args(["worker", "--connect", &format!("tcp/127.0.0.1:{port}")])
-            .args([
-                "--slots",
-                &slots.to_string(),
-                "--min-trial-ms",
-                &pace_ms.to_string(),
-            ])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap()
+    impl Drop for Coordinator {
+        fn drop(&mut self) {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+            if std::thread::panicking() {
+                eprintln!(
+                    "--- coordinator stderr ---\n{}",
+                    std::fs::read_to_string(&self.stderr).unwrap_or_default()
+                );
+            }
+        }
+    }
+
+    fn worker(port: u16, slots: u32, pace_ms: u64) -> Proc {
+        Proc::spawn(
+            naofarm()
+                .args(["worker", "--connect", &format!("tcp/127.0.0.1:{port}")])
+                .args([
+                    "--slots",
+                    &slots.to_string(),
+                    "--min-trial-ms",
+                    &pace_ms.to_string(),
+                ])
+                .env("RUST_LOG", "warn,naofarm_worker::service=info")
+                .stdout(Stdio::null()),
+            &std::env::temp_dir(),
+            "worker",
+        )
+    }
+
+    /// Log text without the terminal colours tracing may add.
+    fn plain(log: &str) -> String {
+        let mut text = String::new();
+        let mut in_escape = false;
+        for ch in log.chars() {
+            match (in_escape, ch) {
+                (false, '\u{1b}') => in_escape = true,
+                (true, 'm') => in_escape = false,
+                (true, _) => {}
+                (false, c) => text.push(c),
+            }
+        }
+        text
+    }
+
+    /// The id of a worker (from its "worker ready" log line), waiting for it.
+    fn worker_id(p: &Proc) -> String {
+        let deadline = Instant::now() + TIMEOUT;
+        loop {
+            let text = plain(&p.stderr());
+            if let Some(id) = text
+                .lines()
+                .find(|l| l.contains("worker ready"))
+                .and_then(|l| l.split("worker=").nth(1))
+                .and_then(|r| r.split_whitespace().next())
+            {
+                return id.to_string();
+            }
+            assert!(
+                Instant::now() < deadline,
+                "the worker never got ready: {text}"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// The index of a worker of `ws` that the run in `out` has journaled an
+    /// outcome of (so it is connected and being given work), waiting for one.
+    fn a_busy_worker(out: &Path, ws: &[Proc]) -> usize {
+        let ids: Vec<String> = ws.iter().map(worker_id).collect();
+        let deadline = Instant::now() + TIMEOUT;
+        loop {
+            let records = Journal::read(out).map(|s| s.records()).unwrap_or_default();
+            if let Some(i) = ids.iter().position(|id| {
+                records
+                    .iter()
+                    .any(|r| matches!(r, Record::Outcome { worker, .. } if worker == id))
+            }) {
+                return i;
+            }
+            assert!(Instant::now() < deadline, "no worker ran a trial");
+            std::thread::sleep(Duration::from_millis(20));
+        }
     }
 
     fn journal(dir: &Path) -> Vec<Record> {
@@ -261,10 +358,9 @@ mod farm {
         assert_eq!(seen.len() as u64, iterations * 6, "every trial journaled");
     }
 
-    fn kill_all(children: &mut [Child]) {
+    fn kill_all(children: &mut [Proc]) {
         for c in children.iter_mut() {
-            let _ = c.kill();
-            let _ = c.wait();
+            c.kill();
         }
     }
 
@@ -283,7 +379,7 @@ mod farm {
         let port = free_port();
         let out = dir.join("run");
         // Workers first: they keep trying to connect until the coordinator listens.
-        let mut ws: Vec<Child> = (0..n).map(|_| worker(port, 2, 15)).collect();
+        let mut ws: Vec<Proc> = (0..n).map(|_| worker(port, 2, 15)).collect();
         let mut c = Coordinator::start(&exp, &out, port, 30.0);
         let status = c.wait_exit();
         kill_all(&mut ws);
@@ -319,32 +415,83 @@ mod farm {
         let port = free_port();
         let out = dir.join("run");
         let mut c = Coordinator::start(&exp, &out, port, 30.0);
-        let mut ws: Vec<Child> = (0..3).map(|_| worker(port, 2, 20)).collect();
+        let mut ws: Vec<Proc> = (0..3).map(|_| worker(port, 2, 20)).collect();
         c.wait_decided(3);
-        ws[0].kill().unwrap();
-        let _ = ws[0].wait();
+        let victim = a_busy_worker(&out, &ws);
+        ws[victim].kill();
         let status = c.wait_exit();
         kill_all(&mut ws);
         assert!(status.success(), "{:?}", c.seen);
-        assert_every_trial_once(&journal(&out), 20);
+        let records = journal(&out);
+        assert_every_trial_once(&records, 20);
+        // Every worker is kept busy, so the killed one held trials: the
+        // coordinator journaled their loss and gave them to others.
+        let finished = c.finished();
+        assert!(finished["redispatched"].as_u64() >= Some(1), "{finished}");
+        let lost: Vec<&Record> = records
+            .iter()
+            .filter(|r| matches!(r, Record::Failed { reason, .. } if reason.contains("went away")))
+            .collect();
+        assert!(
+            !lost.is_empty(),
+            "the killed worker's trials are journaled as lost"
+        );
+        for r in lost {
+            let Record::Failed {
+                iteration,
+                trial,
+                worker,
+                ..
+            } = r
+            else {
+                unreachable!()
+            };
+            let ran = records.iter().find_map(|o| match o {
+                Record::Outcome {
+                    iteration: i,
+                    trial: k,
+                    worker: w,
+                    ..
+                } if i == iteration && k == trial => Some(w.clone()),
+                _ => None,
+            });
+            assert!(
+                ran.is_some_and(|w| &w != worker),
+                "trial {iteration}/{trial} re-dispatched to another worker"
+            );
+        }
     }
 
     #[test]
     fn a_frozen_worker_is_replaced_and_its_late_outcomes_ignored() {
         let dir = scratch("sigstop");
-        let exp = experiment(&dir, 16);
+        let exp = experiment(&dir, 24);
         let port = free_port();
         let out = dir.join("run");
-        let mut c = Coordinator::start(&exp, &out, port, 2.0);
-        let mut ws: Vec<Child> = (0..3).map(|_| worker(port, 2, 20)).collect();
+        let mut c = Coordinator::start(&exp, &out, port, 1.0);
+        let mut ws: Vec<Proc> = (0..3).map(|_| worker(port, 2, 20)).collect();
         c.wait_decided(2);
-        signal(&ws[0], "-STOP");
-        c.wait_decided(8);
-        signal(&ws[0], "-CONT");
+        let frozen = a_busy_worker(&out, &ws);
+        signal(&ws[frozen].child, "-STOP");
+        // Frozen past its trials' 1 s lease but not its 3 s transport lease:
+        // the trials go elsewhere, and the frozen worker's answers still arrive.
+        c.wait_log("lease expired");
+        signal(&ws[frozen].child, "-CONT");
         let status = c.wait_exit();
         kill_all(&mut ws);
         assert!(status.success(), "{:?}", c.seen);
-        assert_every_trial_once(&journal(&out), 16);
+        assert_every_trial_once(&journal(&out), 24);
+        // The frozen worker's trials went to others when their lease passed;
+        // its late outcomes, sent on SIGCONT, were counted once: as duplicates
+        // (or refused, when their iteration was already decided), never journaled.
+        let f = c.finished();
+        assert_eq!(f["accepted"], 24 * 6, "{f}");
+        assert!(f["redispatched"].as_u64() >= Some(1), "{f}");
+        let late = f["duplicates"].as_u64().unwrap_or(0) + f["refused"].as_u64().unwrap_or(0);
+        assert!(
+            late >= 1,
+            "the late outcomes arrived and were not journaled: {f}"
+        );
     }
 
     #[test]
@@ -354,7 +501,7 @@ mod farm {
         let exp = experiment(&dir, 20);
         let port = free_port();
         let out = dir.join("run");
-        let mut ws: Vec<Child> = (0..2).map(|_| worker(port, 2, 10)).collect();
+        let mut ws: Vec<Proc> = (0..2).map(|_| worker(port, 2, 10)).collect();
         // SIGKILL at several points: after 3 new decisions, 6 more, 5 more.
         for n in [3, 6, 5] {
             let mut c = Coordinator::start(&exp, &out, port, 30.0);
@@ -385,22 +532,22 @@ mod farm {
         );
         let port = free_port();
         let out = dir.join("run");
-        let mut bad = naofarm()
-            .args(["worker", "--connect", &format!("tcp/127.0.0.1:{port}")])
-            .args(["--slots", "2", "--min-trial-ms", "5"])
-            .env("NAOFARM_FAULT_TRIAL", "fail")
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
+        let mut bad = Proc::spawn(
+            naofarm()
+                .args(["worker", "--connect", &format!("tcp/127.0.0.1:{port}")])
+                .args(["--slots", "2", "--min-trial-ms", "5"])
+                .env("NAOFARM_FAULT_TRIAL", "fail")
+                .stdout(Stdio::null()),
+            &dir,
+            "failing-worker",
+        );
         // All workers first (they retry until the coordinator listens); the bad
         // one has the most free slots, so it is offered work first.
         let mut ws = vec![worker(port, 1, 20), worker(port, 1, 20)];
         let mut c = Coordinator::start(&exp, &out, port, 30.0);
         let status = c.wait_exit();
         kill_all(&mut ws);
-        let _ = bad.kill();
-        let _ = bad.wait();
+        bad.kill();
         assert!(status.success(), "{:?}", c.seen);
         let finished: serde_json::Value = c
             .seen
@@ -625,7 +772,9 @@ mod farm {
             .unwrap();
         // The coordinator answers its status query once the session is up;
         // only then start the worker, so that no message is published unseen.
+        let ask_deadline = Instant::now() + TIMEOUT;
         let ask = |key: String| loop {
+            assert!(Instant::now() < ask_deadline, "no answer to {key}");
             let replies = session
                 .get(key.as_str())
                 .timeout(Duration::from_secs(2))
@@ -652,7 +801,21 @@ mod farm {
         kill_all(&mut ws);
         assert!(status.success());
         let mut kinds = std::collections::BTreeMap::new();
-        while let Ok((key, encoding, text)) = rx.recv_timeout(Duration::from_millis(500)) {
+        // The coordinator's last message is a finished status; one session's
+        // messages arrive in order, so everything before it has arrived then.
+        let deadline = Instant::now() + TIMEOUT;
+        let mut finished = false;
+        let next = |finished: bool| {
+            if finished {
+                return rx.try_recv().ok();
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            Some(
+                rx.recv_timeout(left)
+                    .expect("the finished status before the deadline"),
+            )
+        };
+        while let Some((key, encoding, text)) = next(finished) {
             assert_eq!(encoding, zenoh::bytes::Encoding::APPLICATION_JSON, "{key}");
             let v: serde_json::Value = serde_json::from_str(&text).unwrap();
             let schema = match key.split('/').nth(2) {
@@ -664,6 +827,7 @@ mod farm {
             };
             conforms(&schemas, schema, &v).unwrap_or_else(|e| panic!("{key}: {e}"));
             *kinds.entry(schema).or_insert(0) += 1;
+            finished |= schema == "RunStatus" && v["finished"] == true;
         }
         assert_eq!(kinds.get("TrialOutcome"), Some(&48), "{kinds:?}");
         assert_eq!(kinds.get("IterationResult"), Some(&8), "{kinds:?}");
@@ -848,7 +1012,7 @@ mod farm {
         for b in &bad {
             session.put(&key, b.clone()).wait().unwrap();
         }
-        let mut ws: Vec<Child> = (0..2).map(|_| worker(port, 2, 5)).collect();
+        let mut ws: Vec<Proc> = (0..2).map(|_| worker(port, 2, 5)).collect();
         let status = c.wait_exit();
         kill_all(&mut ws);
         session.close().wait().unwrap();

@@ -54,3 +54,54 @@ pub fn scratch(name: &str) -> PathBuf {
     std::fs::create_dir_all(&d).unwrap();
     d
 }
+
+/// A child process that is killed when the test lets go of it (an assert
+/// that fails included), with its stderr kept in a file and printed when the
+/// test is failing.
+pub struct Proc {
+    /// The process.
+    pub child: std::process::Child,
+    name: String,
+    stderr: PathBuf,
+}
+
+impl Proc {
+    /// Starts `cmd` with stderr to a file named after `name` in `dir`.
+    pub fn spawn(cmd: &mut Command, dir: &std::path::Path, name: &str) -> Self {
+        use std::sync::atomic::{AtomicU32, Ordering};
+        static N: AtomicU32 = AtomicU32::new(0);
+        let stderr = dir.join(format!(
+            "{name}-{}.stderr",
+            N.fetch_add(1, Ordering::Relaxed)
+        ));
+        let child = cmd
+            .stderr(std::fs::File::create(&stderr).unwrap())
+            .spawn()
+            .unwrap();
+        Self {
+            child,
+            name: name.to_string(),
+            stderr,
+        }
+    }
+
+    /// Kills it (SIGKILL) and reaps it.
+    pub fn kill(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+
+    /// What it wrote to stderr so far.
+    pub fn stderr(&self) -> String {
+        std::fs::read_to_string(&self.stderr).unwrap_or_default()
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        self.kill();
+        if std::thread::panicking() {
+            eprintln!("--- stderr of {} ---\n{}", self.name, self.stderr());
+        }
+    }
+}
