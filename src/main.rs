@@ -1,25 +1,30 @@
 //! The one naofarm CLI: parses arguments and wires the crates together.
+//!
+//! Layout: [`args`] (every clap type), [`commands`] (one file per command),
+//! and the leaves they share: [`common`] (exit-code failure, experiment
+//! files, NAME=VALUE parameters), [`out`] (pipe-safe output), [`net`] (zenoh
+//! configuration and session), [`serve`] (serving a run with its view),
+//! [`view`] (the progress view). Leaves use no command; commands use no
+//! other command. Library logic belongs in the crates, not here.
 
 #[macro_use]
 mod out;
 
-mod benches;
-mod cli;
-mod farm;
-mod history;
-mod journal;
+mod args;
+mod commands;
+mod common;
 mod net;
-mod robot;
-mod tune;
+mod serve;
 mod view;
-mod watch;
 
 use std::process::ExitCode;
 
+use args::{Cli, Command};
 use clap::Parser;
+use common::Failure;
 
 fn main() -> ExitCode {
-    let args = cli::Cli::parse();
+    let args = args::Cli::parse();
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
@@ -31,15 +36,48 @@ fn main() -> ExitCode {
         )
         .with_writer(std::io::stderr)
         .init();
-    match cli::dispatch(args) {
+    match dispatch(args) {
         Ok(()) => ExitCode::SUCCESS,
-        Err(cli::Failure::Usage(e)) => {
+        Err(Failure::Usage(e)) => {
             eprintln!("error: {e:#}");
             ExitCode::from(2)
         }
-        Err(cli::Failure::Job(e)) => {
+        Err(Failure::Job(e)) => {
             eprintln!("error: {e:#}");
             ExitCode::from(1)
         }
+    }
+}
+
+/// Runs the chosen subcommand.
+fn dispatch(cli: Cli) -> Result<(), Failure> {
+    match cli.command {
+        Command::Check { experiment, json } => commands::check::check(&experiment, json),
+        Command::Run {
+            job,
+            workers,
+            json,
+            listen,
+        } => commands::run::run(&job, workers, json, listen.as_deref()),
+        Command::Coordinator { job, net, json } => {
+            commands::coordinator::coordinator(&job, &net, json)
+        }
+        Command::Worker {
+            net,
+            slots,
+            min_trial_ms,
+        } => commands::worker::worker(&net, slots, min_trial_ms),
+        Command::Watch(a) => commands::watch::watch(&a),
+        Command::Clop(a) => commands::clop::clop(&a),
+        Command::History { dir, json, csv } => commands::history::history(&dir, json, csv),
+        Command::Journal(j) => commands::journal::journal(j),
+        Command::Bench(b) => commands::bench::bench(b),
+        Command::Stand(a) => commands::stand::stand(&a),
+        Command::Trial(a) => commands::trial::trial(&a),
+        Command::Model {
+            robot_type,
+            params,
+            json,
+        } => commands::model::model(robot_type, &params, json),
     }
 }

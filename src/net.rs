@@ -1,27 +1,8 @@
 //! The zenoh configuration of every networked subcommand: a file in zenoh's
 //! own json5 format first, then flags.
 
-use std::path::PathBuf;
-
+use crate::args::NetArgs;
 use anyhow::Context;
-use clap::Args;
-
-/// Endpoint flags shared by `coordinator`, `worker`, `run` and `watch`.
-#[derive(Args, Debug, Clone, Default)]
-pub struct NetArgs {
-    /// Connect to this zenoh endpoint (repeatable), e.g. tcp/10.0.0.5:7447.
-    #[arg(long = "connect", value_name = "ENDPOINT")]
-    pub connect: Vec<String>,
-    /// Listen on this zenoh endpoint (repeatable), e.g. tcp/0.0.0.0:7447.
-    #[arg(long = "listen", value_name = "ENDPOINT")]
-    pub listen: Vec<String>,
-    /// A zenoh configuration file (json5); flags override it.
-    #[arg(long = "config", value_name = "FILE")]
-    pub config: Option<PathBuf>,
-    /// Key prefix of every topic.
-    #[arg(long, default_value = protocol::keys::DEFAULT_PREFIX)]
-    pub prefix: String,
-}
 
 fn json_list(v: &[String]) -> String {
     serde_json::to_string(v).unwrap_or_else(|_| "[]".into())
@@ -67,8 +48,8 @@ pub fn free_loopback_port() -> anyhow::Result<u16> {
 }
 
 /// Opens a zenoh session (the one place every command does).
-pub async fn open_session(cfg: zenoh::Config) -> Result<zenoh::Session, crate::cli::Failure> {
+pub async fn open_session(cfg: zenoh::Config) -> Result<zenoh::Session, crate::common::Failure> {
     zenoh::open(cfg)
         .await
-        .map_err(|e| crate::cli::Failure::Job(anyhow::anyhow!("zenoh: {e}")))
+        .map_err(|e| crate::common::Failure::Job(anyhow::anyhow!("zenoh: {e}")))
 }

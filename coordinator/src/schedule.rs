@@ -7,7 +7,8 @@
 //! *in flight* on that worker until the worker answers, its lease passes
 //! ([`Scheduler::tick`]), or the worker goes (token dropped, or silent for
 //! four silence periods). Workers that failed a trial are avoided for it while
-//! another live worker exists; workers set aside get no work. Must not: decide
+//! another live worker exists, and for one silence period after it failed;
+//! workers set aside get no work. Must not: decide
 //! whether an outcome counts (the run does) or block.
 
 use std::{
@@ -52,6 +53,8 @@ pub struct Scheduler {
     inflight: HashMap<TrialId, Inflight>,
     workers: BTreeMap<String, WorkerInfo>,
     set_aside: BTreeSet<String>,
+    /// A failed trial is not offered again to a worker that failed it before this.
+    hold: HashMap<TrialId, Instant>,
 }
 
 impl Scheduler {
@@ -66,6 +69,7 @@ impl Scheduler {
             inflight: HashMap::new(),
             workers: BTreeMap::new(),
             set_aside: BTreeSet::new(),
+            hold: HashMap::new(),
         }
     }
 
@@ -107,6 +111,7 @@ impl Scheduler {
     /// The trial is done (decided or no longer wanted): off the queue and out of flight.
     pub fn forget(&mut self, t: TrialId) {
         self.queue.remove(&t);
+        self.hold.remove(&t);
         if let Some(f) = self.inflight.remove(&t) {
             if let Some(w) = self.workers.get_mut(&f.worker) {
                 w.assigned.remove(&t);
@@ -126,6 +131,14 @@ impl Scheduler {
             self.inflight.remove(&t);
         }
         held
+    }
+
+    /// Trial `t` just failed on a worker: it is queued again, and offered to a
+    /// worker that already failed it only one silence period from now (other
+    /// workers, or ones joining meanwhile, get it first).
+    pub fn failed(&mut self, t: TrialId, now: Instant) {
+        self.hold.insert(t, now + self.silence);
+        self.enqueue(t);
     }
 
     /// Sets a worker aside: it gets no more work.
@@ -184,11 +197,12 @@ impl Scheduler {
                 .workers
                 .iter()
                 .any(|(id, w)| self.usable(id, w, now) && !failed.contains(id));
+            let held = self.hold.get(&t).is_some_and(|until| now < *until);
             let pick = self
                 .workers
                 .iter()
                 .filter(|(id, w)| free(self, id, w))
-                .filter(|(id, _)| !(fresh_exists && failed.contains(*id)))
+                .filter(|(id, _)| !((fresh_exists || held) && failed.contains(*id)))
                 .max_by_key(|(id, w)| {
                     (
                         u64::from(w.slots) - w.assigned.len() as u64,

@@ -184,7 +184,7 @@ impl State {
             FailureVerdict::Retry => {
                 self.counters.failures += 1;
                 self.counters.redispatched += 1;
-                self.sched.enqueue(t);
+                self.sched.failed(t, Instant::now());
             }
             FailureVerdict::GiveUp(g) => {
                 self.counters.failures += 1;
@@ -523,4 +523,18 @@ async fn dispatch(session: &Session, st: &mut State) {
             tracing::warn!(worker = %id, error = %e, "dispatch failed");
         }
     }
+}
+
+/// CPU time (user + system) this process has used, from `/proc/self/stat`
+/// (Linux; clock ticks of 1/100 s, the kernel's USER_HZ). `None` elsewhere.
+#[must_use]
+pub fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (which may hold spaces) closed by ')'.
+    let rest = stat.rsplit_once(')')?.1;
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    // utime and stime are fields 14 and 15 of stat(5); `rest` starts at field 3.
+    let utime: f64 = fields.get(11)?.parse().ok()?;
+    let stime: f64 = fields.get(12)?.parse().ok()?;
+    Some((utime + stime) / 100.0)
 }

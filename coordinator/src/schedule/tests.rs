@@ -107,10 +107,14 @@ async fn a_failed_trial_waits_for_another_worker_while_one_lives() {
     s.enqueue((0, 1));
     let d = s.dispatch(Instant::now(), &failed_on_b);
     assert!(d.contains(&((0, 0), "a".to_string())), "{d:?}");
-    // With "a" gone, "b" is the only live worker: it gets the trial again.
+    // With "a" gone, "b" is the only live worker: it gets the trial again,
+    // but only one silence period after its failure (a joining worker first).
     let mut s2 = sched();
     s2.worker_seen("b", Some(1), Instant::now());
-    s2.enqueue((0, 0));
+    s2.failed((0, 0), Instant::now());
+    assert!(s2.dispatch(Instant::now(), &failed_on_b).is_empty(), "held");
+    advance(SILENCE).await;
+    s2.worker_seen("b", Some(1), Instant::now());
     assert_eq!(
         s2.dispatch(Instant::now(), &failed_on_b),
         [((0, 0), "b".to_string())]

@@ -6,29 +6,17 @@
 use std::time::{Duration, Instant};
 
 use anyhow::anyhow;
-use clap::Args;
 use protocol::{
     keys,
     wire::{IterationResult, RunStatus, TrialOutcome, WireMessage},
 };
 use zenoh::{query::ConsolidationMode, sample::SampleKind, Session};
 
-use crate::{cli::Failure, net::NetArgs, view::View};
-
-/// Arguments of `watch`.
-#[derive(Args, Debug)]
-pub struct WatchArgs {
-    /// The run to follow; without it, list the runs that answer.
-    run: Option<String>,
-    #[command(flatten)]
-    net: NetArgs,
-    /// One JSON line per event instead of the terminal view.
-    #[arg(long)]
-    json: bool,
-    /// Seconds to wait for a coordinator to answer before giving up.
-    #[arg(long, default_value_t = 5.0)]
-    timeout_s: f64,
-}
+use crate::{
+    args::{NetArgs, WatchArgs},
+    common::Failure,
+    view::View,
+};
 
 /// Where a watcher connects when nothing is given: a coordinator's default.
 const DEFAULT_CONNECT: &str = "tcp/127.0.0.1:7447";

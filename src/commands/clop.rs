@@ -1,46 +1,13 @@
 //! `naofarm clop`: arguments and output of the local tuning command
 //! ([`tools::tune`] plays the games).
 
-use std::{path::PathBuf, time::Duration};
+use std::time::Duration;
 
 use anyhow::anyhow;
-use clap::Args;
 use coordinator::clop::Clop;
 use tools::tune::{parse_param, tune, Games, TuneError, Tuning};
 
-use crate::cli::Failure;
-
-/// Arguments of `naofarm clop`.
-#[derive(Args, Debug)]
-pub struct ClopArgs {
-    /// A parameter, NAME:KIND:LO:HI (KIND: linear, integer, gamma, integer_gamma); repeatable, in order.
-    #[arg(long = "param", value_name = "NAME:KIND:LO:HI", required = true)]
-    params: Vec<String>,
-    /// Games to play in all (a resumed log's games count).
-    #[arg(long)]
-    budget: u64,
-    /// Seed of CLOP's sampler and of the games' seeds.
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
-    /// A command started once: reads `<game> <seed> <v1> <v2> …`, answers `W`, `D` or `L` per line.
-    #[arg(long, conflicts_with = "script", required_unless_present = "script")]
-    evaluator: Option<String>,
-    /// A command run once per game with `<processor> <seed> <name1> <value1> …`; its last line is W, L or D.
-    #[arg(long)]
-    script: Option<String>,
-    /// Append every game here (JSON lines); an existing log is replayed and continued.
-    #[arg(long)]
-    log: Option<PathBuf>,
-    /// Seconds one game may take before the evaluator is declared hung.
-    #[arg(long, default_value_t = 600.0)]
-    timeout_s: f64,
-    /// CLOP's DrawElo (draws are likelier with a larger value).
-    #[arg(long, default_value_t = 0.0)]
-    draw_elo: f64,
-    /// Machine-readable output.
-    #[arg(long)]
-    json: bool,
-}
+use crate::{args::ClopArgs, common::Failure};
 
 /// `naofarm clop`.
 pub fn clop(a: &ClopArgs) -> Result<(), Failure> {
@@ -100,7 +67,7 @@ fn report(clop: &Clop, names: &[String], json: bool) -> Result<(), Failure> {
             "draws": d,
             "losses": l,
         });
-        return crate::cli::emit(&format!("{out}\n"));
+        return crate::common::emit(&format!("{out}\n"));
     }
     let show = |v: &[f64]| {
         names
@@ -110,7 +77,7 @@ fn report(clop: &Clop, names: &[String], json: bool) -> Result<(), Failure> {
             .collect::<Vec<_>>()
             .join(", ")
     };
-    crate::cli::emit(&format!(
+    crate::common::emit(&format!(
         "{} games: W {w} D {d} L {l}\nmean: {}\nmax:  {}\n",
         w + d + l,
         show(&mean),

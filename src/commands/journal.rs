@@ -1,47 +1,17 @@
 //! `naofarm journal check DIR` and `naofarm journal salvage DIR --out NEW_DIR`.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use anyhow::anyhow;
-use clap::Subcommand;
 use coordinator::{
     journal::{Journal, Tail},
-    run::{read_run, salvage, RunError, RunView},
+    run::{read_run, salvage, RunError},
 };
 
-use crate::cli::{emit, Failure};
-
-/// The journal commands.
-#[derive(Subcommand, Debug)]
-pub enum JournalCommand {
-    /// Verify every frame of a run's journal: exit 0, or 1 with the offset of the damage.
-    Check {
-        /// The run directory.
-        dir: PathBuf,
-        /// Machine-readable output.
-        #[arg(long)]
-        json: bool,
-    },
-    /// Write every valid record of a damaged journal into a new run directory that resumes.
-    Salvage {
-        /// The damaged run directory (only read).
-        dir: PathBuf,
-        /// The new run directory (must hold no journal).
-        #[arg(long)]
-        out: PathBuf,
-    },
-}
-
-/// Says on stderr what a torn tail means, unless the run is live (then it is in progress).
-pub fn note_tail(dir: &Path, view: &RunView) {
-    if let (Tail::Torn { offset, len }, false) = (&view.tail, view.live) {
-        eprintln!(
-            "note: {}: the last {len} bytes (from offset {offset}) are an interrupted append; \
-             resuming the run saves them to journal.nfj.torn-{offset} and cuts them",
-            Journal::path_in(dir).display()
-        );
-    }
-}
+use crate::{
+    args::JournalCommand,
+    common::{emit, Failure},
+};
 
 /// Runs a journal command.
 pub fn journal(cmd: JournalCommand) -> Result<(), Failure> {

@@ -5,7 +5,7 @@ use std::path::Path;
 use anyhow::anyhow;
 use coordinator::{evolve::DecidedIteration, run::read_run};
 
-use crate::cli::{emit, Failure};
+use crate::common::{emit, Failure};
 
 fn opt(v: Option<f64>) -> serde_json::Value {
     v.map_or(serde_json::Value::Null, serde_json::Value::from)
@@ -22,7 +22,7 @@ pub fn history(dir: &Path, json: bool, csv: bool) -> Result<(), Failure> {
         }
         e => Failure::Job(e.into()),
     })?;
-    crate::journal::note_tail(dir, &view);
+    crate::common::note_tail(dir, &view);
     let (exp, decided) = (view.experiment, view.decided);
     let names: Vec<&str> = exp.parameter.iter().map(|p| p.name.as_str()).collect();
     // ν′ at the end of the history: the row flagged `best`.

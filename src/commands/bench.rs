@@ -1,45 +1,31 @@
-//! `naofarm bench clop` (the CLOP regret table and the cost per step) and
-//! `naofarm bench farm` (throughput of real coordinator and worker processes).
+//! `naofarm bench`: `clop` (the CLOP regret table and the cost per step),
+//! `farm` (throughput of real coordinator and worker processes) and `sim`
+//! (the rebuilt NAO's real-time factor on one core).
+
+use std::time::Instant;
 
 use anyhow::anyhow;
-use clap::Args;
+use protocol::params::ParamValues;
 use tools::{
     bench::{self, Algorithm},
     problems::Problem,
 };
+use worker::nao::{
+    model::NaoModel,
+    sim::{fallen, standing_angles, Sim, SimSettings, Start, CYCLE_S},
+    trial,
+};
 
-use crate::cli::{BenchCommand, Failure};
+use crate::{
+    args::{BenchCommand, ClopBenchArgs, FarmBenchArgs, SimBenchArgs},
+    common::Failure,
+};
 
-/// Arguments of `bench clop`.
-#[derive(Args, Debug)]
-pub struct ClopBenchArgs {
-    /// Problem (log, flat, power, angle, step, rosenbrock, correlated, log2, log5, rosenbrock2, rosenbrock5, correlated2, or all).
-    #[arg(long, default_value = "log")]
-    problem: String,
-    /// Budgets in games, comma-separated.
-    #[arg(long, default_value = "100,1000", value_delimiter = ',')]
-    budgets: Vec<u64>,
-    /// Independent runs per problem and algorithm.
-    #[arg(long, default_value_t = 50)]
-    runs: usize,
-    /// Seed of the outcome streams and samplers.
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
-    /// Algorithms, comma-separated (clop, cmaes, random).
-    #[arg(long, default_value = "clop,cmaes,random", value_delimiter = ',')]
-    algorithms: Vec<String>,
-    /// Also measure the cost of one tell+ask at n = 100, 1000, 5000 for d = 1 and 5.
-    #[arg(long)]
-    cost: bool,
-    /// Machine-readable output.
-    #[arg(long)]
-    json: bool,
-}
-
+/// Runs a benchmark.
 pub fn bench(cmd: BenchCommand) -> Result<(), Failure> {
     match cmd {
         BenchCommand::Clop(a) => clop(&a),
-        BenchCommand::Sim(a) => crate::robot::bench_sim(&a),
+        BenchCommand::Sim(a) => bench_sim(&a),
         BenchCommand::Farm(a) => farm(&a),
     }
 }
@@ -118,26 +104,6 @@ fn clop(a: &ClopBenchArgs) -> Result<(), Failure> {
         }
     }
     Ok(())
-}
-
-/// Arguments of `bench farm`.
-#[derive(Args, Debug)]
-pub struct FarmBenchArgs {
-    /// Worker processes (one slot each) for the zero-cost synthetic runs.
-    #[arg(long, default_value = "1,4,16", value_delimiter = ',')]
-    workers: Vec<u32>,
-    /// Iterations of each synthetic run (10 trials each, pipeline depth 4).
-    #[arg(long, default_value_t = 150)]
-    iterations: u64,
-    /// Iterations of the NAO runs with 1 and 2 workers (0: skip them).
-    #[arg(long, default_value_t = 4)]
-    nao_iterations: u64,
-    /// The experiment whose space and constants the runs use (the model is set per case).
-    #[arg(long, default_value = "experiments/physical-technical.toml")]
-    experiment: std::path::PathBuf,
-    /// Machine-readable output.
-    #[arg(long)]
-    json: bool,
 }
 
 /// One measured farm run.
@@ -238,7 +204,7 @@ fn farm(a: &FarmBenchArgs) -> Result<(), Failure> {
         )));
     }
     // Refuse a bad file before starting any process.
-    crate::cli::load_experiment(&a.experiment)?;
+    crate::common::load_experiment(&a.experiment)?;
     let exp = &a.experiment;
     let mut rows = Vec::new();
     for &w in &a.workers {
@@ -253,7 +219,7 @@ fn farm(a: &FarmBenchArgs) -> Result<(), Failure> {
     }
     if a.json {
         let text = serde_json::to_string_pretty(&rows).map_err(|e| Failure::Job(e.into()))?;
-        return crate::cli::emit(&format!("{text}\n"));
+        return crate::common::emit(&format!("{text}\n"));
     }
     let mut out = format!(
         "{:<10} {:>7} {:>7} {:>8} {:>10} {:>16} {:>22}\n",
@@ -283,5 +249,188 @@ fn farm(a: &FarmBenchArgs) -> Result<(), Failure> {
             );
         }
     }
-    crate::cli::emit(&out)
+    crate::common::emit(&out)
+}
+
+struct Row {
+    label: String,
+    motion: &'static str,
+    settings: SimSettings,
+    sim_s: f64,
+    wall_s: f64,
+    fell: bool,
+}
+
+fn measure_stand(settings: SimSettings, seconds: f64) -> Result<Row, Failure> {
+    let model =
+        NaoModel::with_params(0, &ParamValues::default()).map_err(|e| Failure::Job(e.into()))?;
+    let q = standing_angles(&model);
+    let t0 = Instant::now();
+    let mut sim = Sim::new(&model, settings, &Start::upright(q.clone()))
+        .map_err(|e| Failure::Job(e.into()))?;
+    let mut p = sim.perceive();
+    let mut fell = false;
+    for _ in 0..(seconds / CYCLE_S).round() as u64 {
+        p = sim.hold(&q).map_err(|e| Failure::Job(e.into()))?;
+        fell |= fallen(&p);
+    }
+    Ok(Row {
+        label: String::new(),
+        motion: "stand",
+        settings,
+        sim_s: p.time_s,
+        wall_s: t0.elapsed().as_secs_f64(),
+        fell,
+    })
+}
+
+fn measure_walk(settings: SimSettings, seconds: f64) -> Result<Row, Failure> {
+    let t0 = Instant::now();
+    let t = trial::run_observed(
+        0,
+        &ParamValues::default(),
+        1,
+        seconds,
+        settings,
+        &mut |_, _| {},
+    )
+    .map_err(|e| Failure::Job(e.into()))?;
+    Ok(Row {
+        label: String::new(),
+        motion: "walk",
+        settings,
+        sim_s: t.measurement.sim_time_s,
+        wall_s: t0.elapsed().as_secs_f64(),
+        fell: t.measurement.fell,
+    })
+}
+
+/// `naofarm bench sim`: real-time factor and physics steps per second on one core.
+pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
+    if !(a.seconds.is_finite() && a.seconds >= 1.0 && a.seconds <= 600.0) {
+        return Err(Failure::Usage(anyhow!("--seconds must be in [1, 600]")));
+    }
+    let d = SimSettings::default();
+    let variants = [
+        ("default: 2x10ms, pgs 12, welded upper body", d),
+        (
+            "4x5ms, pgs 8, welded",
+            SimSettings {
+                substeps: 4,
+                pgs_iterations: 8,
+                ..d
+            },
+        ),
+        (
+            "2x10ms, pgs 12, full 22 hinges",
+            SimSettings {
+                weld_upper_body: false,
+                ..d
+            },
+        ),
+        (
+            "2x10ms, pgs 12, 4 solver iterations",
+            SimSettings {
+                solver_iterations: 4,
+                ..d
+            },
+        ),
+        (
+            "1x20ms, pgs 40, welded",
+            SimSettings {
+                substeps: 1,
+                pgs_iterations: 40,
+                ..d
+            },
+        ),
+        (
+            "impulse joints, 2x10ms, pgs 12, welded",
+            SimSettings {
+                impulse_joints: true,
+                ..d
+            },
+        ),
+        (
+            "impulse joints, 4x5ms, 4 solver its",
+            SimSettings {
+                impulse_joints: true,
+                substeps: 4,
+                solver_iterations: 4,
+                ..d
+            },
+        ),
+        (
+            "impulse joints, 10x2ms, 8 solver its",
+            SimSettings {
+                impulse_joints: true,
+                substeps: 10,
+                solver_iterations: 8,
+                ..d
+            },
+        ),
+        (
+            "2x10ms, pgs 4, welded",
+            SimSettings {
+                pgs_iterations: 4,
+                ..d
+            },
+        ),
+    ];
+    let mut rows = Vec::new();
+    for (label, s) in variants {
+        for motion in ["stand", "walk"] {
+            let mut r = if motion == "stand" {
+                measure_stand(s, a.seconds)?
+            } else {
+                measure_walk(s, a.seconds)?
+            };
+            r.label = label.to_string();
+            rows.push(r);
+        }
+    }
+    let rtf = |r: &Row| r.sim_s / r.wall_s;
+    let sps = |r: &Row| r.sim_s / CYCLE_S * f64::from(r.settings.substeps) / r.wall_s;
+    let headline = rows
+        .iter()
+        .find(|r| r.motion == "walk" && r.settings == d)
+        .ok_or_else(|| Failure::Job(anyhow!("no default walk row")))?;
+    if a.json {
+        let v = serde_json::json!({
+            "realtime_factor": rtf(headline),
+            "steps_per_second": sps(headline),
+            "motion": "expert walk, type 0, default settings, one core",
+            "rows": rows.iter().map(|r| serde_json::json!({
+                "settings": r.label,
+                "motion": r.motion,
+                "substeps": r.settings.substeps,
+                "solver_iterations": r.settings.solver_iterations,
+                "pgs_iterations": r.settings.pgs_iterations,
+                "weld_upper_body": r.settings.weld_upper_body,
+                "realtime_factor": rtf(r),
+                "steps_per_second": sps(r),
+                "fell": r.fell,
+            })).collect::<Vec<_>>(),
+        });
+        outln!("{v}");
+    } else {
+        outln!(
+            "{:<44} {:>6} {:>10} {:>12} {:>6}",
+            "settings",
+            "motion",
+            "realtime×",
+            "steps/s",
+            "fell"
+        );
+        for r in &rows {
+            outln!(
+                "{:<44} {:>6} {:>10.1} {:>12.0} {:>6}",
+                r.label,
+                r.motion,
+                rtf(r),
+                sps(r),
+                r.fell
+            );
+        }
+    }
+    Ok(())
 }

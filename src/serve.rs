@@ -1,5 +1,6 @@
-//! Wiring of `run`, `coordinator` and `worker`: parse, open sessions, call
-//! the services, turn signals into the shutdown channel.
+//! What `run`, `coordinator` and `worker` share: the runtime, the shutdown
+//! signals, opening the run directory, serving a run with its progress view,
+//! the closing summary.
 
 use std::time::Duration;
 
@@ -11,12 +12,12 @@ use coordinator::{
 use protocol::{experiment::TrialModel, wire::RunStatus};
 
 use crate::{
-    cli::{load_experiment, Failure, JobArgs},
-    net::{free_loopback_port, open_session, NetArgs},
+    args::JobArgs,
+    common::{load_experiment, Failure},
     view::View,
 };
 
-fn runtime() -> Result<tokio::runtime::Runtime, Failure> {
+pub fn runtime() -> Result<tokio::runtime::Runtime, Failure> {
     tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -25,7 +26,7 @@ fn runtime() -> Result<tokio::runtime::Runtime, Failure> {
 }
 
 /// A shutdown channel that turns true on SIGINT or SIGTERM.
-fn signals() -> tokio::sync::watch::Receiver<bool> {
+pub fn signals() -> tokio::sync::watch::Receiver<bool> {
     let (tx, rx) = tokio::sync::watch::channel(false);
     tokio::spawn(async move {
         let ctrl_c = tokio::signal::ctrl_c();
@@ -52,7 +53,7 @@ fn signals() -> tokio::sync::watch::Receiver<bool> {
     rx
 }
 
-fn open_run(job: &JobArgs) -> Result<(Run, Vec<coordinator::run::Effect>), Failure> {
+pub fn open_run(job: &JobArgs) -> Result<(Run, Vec<coordinator::run::Effect>), Failure> {
     let (mut exp, text) = load_experiment(&job.experiment)?;
     if let Some(n) = job.iterations {
         exp.iterations = n;
@@ -114,7 +115,7 @@ fn open_run(job: &JobArgs) -> Result<(Run, Vec<coordinator::run::Effect>), Failu
     Ok(opened)
 }
 
-fn service_config(job: &JobArgs, prefix: &str) -> ServiceConfig {
+pub fn service_config(job: &JobArgs, prefix: &str) -> ServiceConfig {
     ServiceConfig {
         prefix: prefix.to_string(),
         lease: Duration::from_secs_f64(job.lease_s),
@@ -123,7 +124,7 @@ fn service_config(job: &JobArgs, prefix: &str) -> ServiceConfig {
 }
 
 /// Shows the service's events in a [`View`] until the channel closes.
-fn spawn_view(
+pub fn spawn_view(
     json: bool,
     mut rx: tokio::sync::mpsc::UnboundedReceiver<Event>,
 ) -> tokio::task::JoinHandle<(View, Option<RunStatus>)> {
@@ -148,20 +149,7 @@ fn spawn_view(
     })
 }
 
-/// CPU time (user + system) this process has used, from `/proc/self/stat`
-/// (Linux; clock ticks of 1/100 s, the kernel's USER_HZ). `None` elsewhere.
-fn process_cpu_seconds() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
-    // Fields after the command name (which may hold spaces) closed by ')'.
-    let rest = stat.rsplit_once(')')?.1;
-    let fields: Vec<&str> = rest.split_whitespace().collect();
-    // utime and stime are fields 14 and 15 of stat(5); `rest` starts at field 3.
-    let utime: f64 = fields.get(11)?.parse().ok()?;
-    let stime: f64 = fields.get(12)?.parse().ok()?;
-    Some((utime + stime) / 100.0)
-}
-
-fn summary(
+pub fn summary(
     run_dir: &std::path::Path,
     ended: &Ended,
     view: Option<(View, Option<RunStatus>)>,
@@ -177,7 +165,7 @@ fn summary(
                     "redispatched": c.redispatched,
                     "failures": c.failures,
                     "set_aside": c.set_aside,
-                    "cpu_s": process_cpu_seconds(),
+                    "cpu_s": service::process_cpu_seconds(),
                 }),
             ),
             _ => view.abandon(),
@@ -208,27 +196,9 @@ fn summary(
     }
 }
 
-/// `naofarm coordinator`.
-pub fn coordinator(job: &JobArgs, net: &NetArgs, json: bool) -> Result<(), Failure> {
-    let cfg = net
-        .zenoh_config(&["tcp/127.0.0.1:7447"])
-        .map_err(Failure::Usage)?;
-    let (run, effects) = open_run(job)?;
-    let rt = runtime()?;
-    rt.block_on(async {
-        let session = open_session(cfg).await?;
-        let shutdown = signals();
-        let served =
-            serve_with_view(&session, (run, effects), job, &net.prefix, shutdown, json).await;
-        let _ = session.close().await;
-        let (ended, view) = served;
-        summary(&job.out, &ended.map_err(|e| Failure::Job(e.into()))?, view)
-    })
-}
-
 /// Serves the run on `session`, its events shown in a [`View`]; returns how it
 /// ended and the view with the last status.
-async fn serve_with_view(
+pub async fn serve_with_view(
     session: &zenoh::Session,
     (run, effects): (Run, Vec<coordinator::run::Effect>),
     job: &JobArgs,
@@ -251,124 +221,4 @@ async fn serve_with_view(
     )
     .await;
     (ended, printer.await.ok())
-}
-
-/// `naofarm worker`.
-pub fn worker(net: &NetArgs, slots: Option<u32>, min_trial_ms: u64) -> Result<(), Failure> {
-    if min_trial_ms > 3_600_000 {
-        return Err(Failure::Usage(anyhow!(
-            "--min-trial-ms {min_trial_ms}: must be at most 3600000"
-        )));
-    }
-    let cfg = net.zenoh_config(&[]).map_err(Failure::Usage)?;
-    let mut wcfg = worker::service::WorkerConfig {
-        prefix: net.prefix.clone(),
-        min_trial: Duration::from_millis(min_trial_ms),
-        ..worker::service::WorkerConfig::default()
-    };
-    if let Some(s) = slots {
-        if s == 0 || s > 4096 {
-            return Err(Failure::Usage(anyhow!("--slots must be in 1..=4096")));
-        }
-        wcfg.slots = s;
-    }
-    let rt = runtime()?;
-    rt.block_on(async {
-        let session = open_session(cfg).await?;
-        let shutdown = signals();
-        let s = worker::service::serve(session.clone(), wcfg, shutdown)
-            .await
-            .map_err(|e| Failure::Job(e.into()))?;
-        let _ = session.close().await;
-        eprintln!(
-            "worker stopped: {} trials run, {} refused",
-            s.trials, s.refused
-        );
-        Ok(())
-    })
-}
-
-/// `naofarm run`: coordinator and local workers in one process, over zenoh on loopback.
-pub fn run(
-    job: &JobArgs,
-    workers: Option<u32>,
-    json: bool,
-    listen: Option<&str>,
-) -> Result<(), Failure> {
-    let n = workers.unwrap_or_else(|| {
-        std::thread::available_parallelism()
-            .ok()
-            .and_then(|n| u32::try_from(n.get()).ok())
-            .unwrap_or(1)
-    });
-    if n == 0 || n > 1024 {
-        return Err(Failure::Usage(anyhow!(
-            "--workers {n}: must be in 1..=1024"
-        )));
-    }
-    let endpoint = match listen {
-        Some(e) if e.starts_with("tcp/127.") || e.starts_with("tcp/[::1]") => e.to_string(),
-        Some(e) => {
-            return Err(Failure::Usage(anyhow!(
-                "--listen `{e}`: `run` serves on loopback only (tcp/127.0.0.1:PORT); use `coordinator` and `worker` for a cluster"
-            )))
-        }
-        None => format!(
-            "tcp/127.0.0.1:{}",
-            free_loopback_port().map_err(Failure::Job)?
-        ),
-    };
-    eprintln!("zenoh on {endpoint}; watch from another terminal with `naofarm watch RUN --connect {endpoint}`");
-    let coord_net = NetArgs {
-        listen: vec![endpoint.clone()],
-        prefix: protocol::keys::DEFAULT_PREFIX.to_string(),
-        ..NetArgs::default()
-    };
-    let worker_net = NetArgs {
-        connect: vec![endpoint],
-        listen: vec![],
-        prefix: protocol::keys::DEFAULT_PREFIX.to_string(),
-        config: None,
-    };
-    let ccfg = coord_net.zenoh_config(&[]).map_err(Failure::Job)?;
-    let (run, effects) = open_run(job)?;
-    let rt = runtime()?;
-    rt.block_on(async {
-        let session = open_session(ccfg).await?;
-        let shutdown = signals();
-        let mut handles = Vec::new();
-        let mut worker_sessions = Vec::new();
-        for _ in 0..n {
-            let wcfg = worker_net.zenoh_config(&[]).map_err(Failure::Job)?;
-            let ws = open_session(wcfg).await?;
-            worker_sessions.push(ws.clone());
-            let cfg = worker::service::WorkerConfig {
-                slots: 1,
-                ..worker::service::WorkerConfig::default()
-            };
-            handles.push(tokio::spawn(worker::service::serve(
-                ws,
-                cfg,
-                shutdown.clone(),
-            )));
-        }
-        let (ended, view) = serve_with_view(
-            &session,
-            (run, effects),
-            job,
-            protocol::keys::DEFAULT_PREFIX,
-            shutdown,
-            json,
-        )
-        .await;
-        for ws in &worker_sessions {
-            let _ = ws.close().await;
-        }
-        for h in handles {
-            h.abort();
-        }
-        let _ = session.close().await;
-        let ended = ended.map_err(|e| Failure::Job(e.into()))?;
-        summary(&job.out, &ended, view)
-    })
 }

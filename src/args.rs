@@ -1,0 +1,362 @@
+//! Every command-line type (clap): the commands and their arguments. A leaf:
+//! it uses no command module.
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand};
+
+/// A distributed trial farm that co-evolves a simulated NAO's body and walk.
+#[derive(Parser)]
+#[command(name = "naofarm", version, about)]
+pub struct Cli {
+    /// The command.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand)]
+pub enum Command {
+    /// All in one: a coordinator and local workers over zenoh on loopback.
+    Run {
+        #[command(flatten)]
+        job: JobArgs,
+        /// Local workers to start (each with one slot); default: one per core.
+        #[arg(long)]
+        workers: Option<u32>,
+        /// Print one JSON line per event instead of the progress view.
+        #[arg(long)]
+        json: bool,
+        /// The loopback endpoint to serve on (default: a free port), e.g. tcp/127.0.0.1:7447,
+        /// so that `naofarm watch` can be pointed at it.
+        #[arg(long, value_name = "ENDPOINT")]
+        listen: Option<String>,
+    },
+    /// The coordinator alone (cluster use): owns the run, its journal and dispatch.
+    Coordinator {
+        #[command(flatten)]
+        job: JobArgs,
+        #[command(flatten)]
+        net: NetArgs,
+        /// Print one JSON line per decided iteration.
+        #[arg(long)]
+        json: bool,
+    },
+    /// A stateless worker (cluster use): runs trials for any coordinator it reaches.
+    Worker {
+        #[command(flatten)]
+        net: NetArgs,
+        /// Trials run at once (default: cores).
+        #[arg(long)]
+        slots: Option<u32>,
+        /// Minimum wall time per trial in ms (paces the synthetic model for farm tests and benchmarks).
+        #[arg(long, default_value_t = 0)]
+        min_trial_ms: u64,
+    },
+    /// Print the rebuilt robot: mass, segment lengths, hip-to-sole height, joint table.
+    Model {
+        /// League robot type 0–4.
+        #[arg(long = "type", default_value_t = 0)]
+        robot_type: u8,
+        /// Override a morphology quantity, NAME=VALUE (repeatable), e.g. ThighRelHip2_Z=-0.05.
+        #[arg(long = "param", value_name = "NAME=VALUE")]
+        params: Vec<String>,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Hold a standing posture with the servos; report falls and torso height.
+    Stand(StandArgs),
+    /// Run n walking trials of one parameter set locally; print the Table IV row.
+    Trial(TrialArgs),
+    /// Benchmarks: `bench clop` (regret and cost), `bench sim` (physics speed).
+    #[command(subcommand)]
+    Bench(BenchCommand),
+    /// Tune any noisy program locally with CLOP (an evaluator process or a script per game).
+    Clop(ClopArgs),
+    /// Follow a run from any machine (live view or JSON lines); without RUN, list the runs.
+    Watch(WatchArgs),
+    /// Print a run's decided history H (iteration, p, s, mx, my, ex, ey, decision, best).
+    History {
+        /// The run directory.
+        dir: PathBuf,
+        /// An array of JSON rows.
+        #[arg(long)]
+        json: bool,
+        /// Comma-separated values with a header line.
+        #[arg(long)]
+        csv: bool,
+    },
+    /// Verify a run's journal (`check`) or copy its valid records into a new run (`salvage`).
+    #[command(subcommand)]
+    Journal(JournalCommand),
+    /// Validate an experiment file and print it as parsed.
+    Check {
+        /// The experiment file (TOML).
+        experiment: PathBuf,
+        /// Print the parsed experiment as JSON.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// What `run` and `coordinator` share: the experiment, the run directory, overrides.
+#[derive(clap::Args, Debug, Clone)]
+pub struct JobArgs {
+    /// The experiment file (TOML).
+    pub experiment: PathBuf,
+    /// The run directory (journal); an existing one is resumed.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Override the number of iterations.
+    #[arg(long)]
+    pub iterations: Option<u64>,
+    /// Override the seed.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Override the trial model (`nao` or `synthetic`).
+    #[arg(long)]
+    pub model: Option<String>,
+    /// Start from an earlier run's history (its run directory).
+    #[arg(long)]
+    pub from: Option<PathBuf>,
+    /// Seconds a worker may hold a trial before it is given to another.
+    #[arg(long, default_value_t = 120.0)]
+    pub lease_s: f64,
+    /// Distinct workers that may fail one trial before the run stops (1–100;
+    /// a resumed run may raise it to retry the trial that stopped it).
+    #[arg(long, default_value_t = 3)]
+    pub max_trial_failures: u32,
+}
+
+/// Benchmarks.
+#[derive(Subcommand, Debug)]
+pub enum BenchCommand {
+    /// CLOP: simple regret on the test problems beside baselines, and cost per step.
+    Clop(ClopBenchArgs),
+    /// The rebuilt NAO: real-time factor and physics steps/s, standing and walking, per settings.
+    Sim(SimBenchArgs),
+    /// The farm: trials/s and coordinator CPU per trial through real processes on loopback.
+    Farm(FarmBenchArgs),
+}
+
+/// Arguments of `bench clop`.
+#[derive(Args, Debug)]
+pub struct ClopBenchArgs {
+    /// Problem (log, flat, power, angle, step, rosenbrock, correlated, log2, log5, rosenbrock2, rosenbrock5, correlated2, or all).
+    #[arg(long, default_value = "log")]
+    pub problem: String,
+    /// Budgets in games, comma-separated.
+    #[arg(long, default_value = "100,1000", value_delimiter = ',')]
+    pub budgets: Vec<u64>,
+    /// Independent runs per problem and algorithm.
+    #[arg(long, default_value_t = 50)]
+    pub runs: usize,
+    /// Seed of the outcome streams and samplers.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Algorithms, comma-separated (clop, cmaes, random).
+    #[arg(long, default_value = "clop,cmaes,random", value_delimiter = ',')]
+    pub algorithms: Vec<String>,
+    /// Also measure the cost of one tell+ask at n = 100, 1000, 5000 for d = 1 and 5.
+    #[arg(long)]
+    pub cost: bool,
+    /// Machine-readable output.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Arguments of `bench farm`.
+#[derive(Args, Debug)]
+pub struct FarmBenchArgs {
+    /// Worker processes (one slot each) for the zero-cost synthetic runs.
+    #[arg(long, default_value = "1,4,16", value_delimiter = ',')]
+    pub workers: Vec<u32>,
+    /// Iterations of each synthetic run (10 trials each, pipeline depth 4).
+    #[arg(long, default_value_t = 150)]
+    pub iterations: u64,
+    /// Iterations of the NAO runs with 1 and 2 workers (0: skip them).
+    #[arg(long, default_value_t = 4)]
+    pub nao_iterations: u64,
+    /// The experiment whose space and constants the runs use (the model is set per case).
+    #[arg(long, default_value = "experiments/physical-technical.toml")]
+    pub experiment: std::path::PathBuf,
+    /// Machine-readable output.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// The journal commands.
+#[derive(Subcommand, Debug)]
+pub enum JournalCommand {
+    /// Verify every frame of a run's journal: exit 0, or 1 with the offset of the damage.
+    Check {
+        /// The run directory.
+        dir: PathBuf,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Write every valid record of a damaged journal into a new run directory that resumes.
+    Salvage {
+        /// The damaged run directory (only read).
+        dir: PathBuf,
+        /// The new run directory (must hold no journal).
+        #[arg(long)]
+        out: PathBuf,
+    },
+}
+
+/// Endpoint flags shared by `coordinator`, `worker`, `run` and `watch`.
+#[derive(Args, Debug, Clone, Default)]
+pub struct NetArgs {
+    /// Connect to this zenoh endpoint (repeatable), e.g. tcp/10.0.0.5:7447.
+    #[arg(long = "connect", value_name = "ENDPOINT")]
+    pub connect: Vec<String>,
+    /// Listen on this zenoh endpoint (repeatable), e.g. tcp/0.0.0.0:7447.
+    #[arg(long = "listen", value_name = "ENDPOINT")]
+    pub listen: Vec<String>,
+    /// A zenoh configuration file (json5); flags override it.
+    #[arg(long = "config", value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Key prefix of every topic.
+    #[arg(long, default_value = protocol::keys::DEFAULT_PREFIX)]
+    pub prefix: String,
+}
+
+/// Arguments of `stand`.
+#[derive(Args, Debug)]
+pub struct StandArgs {
+    /// League robot type 0–4.
+    #[arg(long = "type", default_value_t = 0)]
+    pub robot_type: u8,
+    /// Override a morphology quantity, NAME=VALUE (repeatable).
+    #[arg(long = "param", value_name = "NAME=VALUE")]
+    pub params: Vec<String>,
+    /// Simulated seconds.
+    #[arg(long, default_value_t = 10.0)]
+    pub seconds: f64,
+    /// Machine-readable output.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Arguments of `trial`.
+#[derive(Args, Debug)]
+pub struct TrialArgs {
+    /// Start from a named set (`expert`, the paper's expert values).
+    #[arg(long, default_value = "expert")]
+    pub set: String,
+    /// Override a parameter, NAME=VALUE (repeatable).
+    #[arg(long = "param", value_name = "NAME=VALUE")]
+    pub params: Vec<String>,
+    /// Number of trials.
+    #[arg(long, default_value_t = 10)]
+    pub trials: u64,
+    /// Seed of the first trial (then +1 per trial).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// League robot type 0–4.
+    #[arg(long = "type", default_value_t = 0)]
+    pub robot_type: u8,
+    /// Trial duration, simulated seconds.
+    #[arg(long, default_value_t = 10.0)]
+    pub duration: f64,
+    /// Threads (default: cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Physics sub-steps per 20 ms cycle, 1–50 (default 2; see `bench sim`).
+    #[arg(long)]
+    pub substeps: Option<u32>,
+    /// Rapier solver iterations per sub-step, 1–16 (default 1).
+    #[arg(long)]
+    pub solver_iterations: Option<u32>,
+    /// Rapier PGS iterations per solver iteration, 1–200 (default 12).
+    #[arg(long)]
+    pub pgs_iterations: Option<u32>,
+    /// Reflected rotor inertia of every motorised hinge, kg·m², 0–0.1
+    /// (default 0: the league's robot has none).
+    #[arg(long)]
+    pub armature: Option<f64>,
+    /// Record the first trial (seed --seed; with --run, the farm trial):
+    /// every body's pose each 20 ms cycle, as JSON lines, for a replay.
+    #[arg(long, value_name = "FILE")]
+    pub record: Option<std::path::PathBuf>,
+    /// Replay a farm trial of this run directory (with --iteration and
+    /// --trial): its parameters, robot type, physics and seed come from the
+    /// journal, and the result is compared with the journaled one bit for bit.
+    #[arg(
+        long = "run",
+        value_name = "DIR",
+        requires_all = ["iteration", "trial"],
+        conflicts_with_all = ["params", "trials", "seed", "robot_type", "duration", "substeps",
+            "solver_iterations", "pgs_iterations", "armature"]
+    )]
+    pub run_dir: Option<std::path::PathBuf>,
+    /// With --run: the iteration.
+    #[arg(long, requires = "run_dir")]
+    pub iteration: Option<u64>,
+    /// With --run: the trial index within the iteration.
+    #[arg(long, requires = "run_dir")]
+    pub trial: Option<u32>,
+    /// Machine-readable output with every trial.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Arguments of `bench sim`.
+#[derive(Args, Debug)]
+pub struct SimBenchArgs {
+    /// Simulated seconds per measurement.
+    #[arg(long, default_value_t = 10.0)]
+    pub seconds: f64,
+    /// Machine-readable output.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Arguments of `naofarm clop`.
+#[derive(Args, Debug)]
+pub struct ClopArgs {
+    /// A parameter, NAME:KIND:LO:HI (KIND: linear, integer, gamma, integer_gamma); repeatable, in order.
+    #[arg(long = "param", value_name = "NAME:KIND:LO:HI", required = true)]
+    pub params: Vec<String>,
+    /// Games to play in all (a resumed log's games count).
+    #[arg(long)]
+    pub budget: u64,
+    /// Seed of CLOP's sampler and of the games' seeds.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// A command started once: reads `<game> <seed> <v1> <v2> …`, answers `W`, `D` or `L` per line.
+    #[arg(long, conflicts_with = "script", required_unless_present = "script")]
+    pub evaluator: Option<String>,
+    /// A command run once per game with `<processor> <seed> <name1> <value1> …`; its last line is W, L or D.
+    #[arg(long)]
+    pub script: Option<String>,
+    /// Append every game here (JSON lines); an existing log is replayed and continued.
+    #[arg(long)]
+    pub log: Option<PathBuf>,
+    /// Seconds one game may take before the evaluator is declared hung.
+    #[arg(long, default_value_t = 600.0)]
+    pub timeout_s: f64,
+    /// CLOP's DrawElo (draws are likelier with a larger value).
+    #[arg(long, default_value_t = 0.0)]
+    pub draw_elo: f64,
+    /// Machine-readable output.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Arguments of `watch`.
+#[derive(Args, Debug)]
+pub struct WatchArgs {
+    /// The run to follow; without it, list the runs that answer.
+    pub run: Option<String>,
+    #[command(flatten)]
+    pub net: NetArgs,
+    /// One JSON line per event instead of the terminal view.
+    #[arg(long)]
+    pub json: bool,
+    /// Seconds to wait for a coordinator to answer before giving up.
+    #[arg(long, default_value_t = 5.0)]
+    pub timeout_s: f64,
+}

@@ -1,0 +1,26 @@
+//! `naofarm coordinator`: the coordinator alone (cluster use).
+
+use crate::{
+    args::{JobArgs, NetArgs},
+    common::Failure,
+    net::open_session,
+    serve::{open_run, runtime, serve_with_view, signals, summary},
+};
+
+/// `naofarm coordinator`.
+pub fn coordinator(job: &JobArgs, net: &NetArgs, json: bool) -> Result<(), Failure> {
+    let cfg = net
+        .zenoh_config(&["tcp/127.0.0.1:7447"])
+        .map_err(Failure::Usage)?;
+    let (run, effects) = open_run(job)?;
+    let rt = runtime()?;
+    rt.block_on(async {
+        let session = open_session(cfg).await?;
+        let shutdown = signals();
+        let served =
+            serve_with_view(&session, (run, effects), job, &net.prefix, shutdown, json).await;
+        let _ = session.close().await;
+        let (ended, view) = served;
+        summary(&job.out, &ended.map_err(|e| Failure::Job(e.into()))?, view)
+    })
+}

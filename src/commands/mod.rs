@@ -1,0 +1,15 @@
+//! One module per command; each parses nothing (see `crate::args`) and calls
+//! the crates.
+
+pub mod bench;
+pub mod check;
+pub mod clop;
+pub mod coordinator;
+pub mod history;
+pub mod journal;
+pub mod model;
+pub mod run;
+pub mod stand;
+pub mod trial;
+pub mod watch;
+pub mod worker;

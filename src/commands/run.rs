@@ -1,0 +1,96 @@
+//! `naofarm run`: a coordinator and local workers in one process, over zenoh
+//! on loopback.
+
+use anyhow::anyhow;
+
+use crate::{
+    args::{JobArgs, NetArgs},
+    common::Failure,
+    net::{free_loopback_port, open_session},
+    serve::{open_run, runtime, serve_with_view, signals, summary},
+};
+
+/// `naofarm run`: coordinator and local workers in one process, over zenoh on loopback.
+pub fn run(
+    job: &JobArgs,
+    workers: Option<u32>,
+    json: bool,
+    listen: Option<&str>,
+) -> Result<(), Failure> {
+    let n = workers.unwrap_or_else(|| {
+        std::thread::available_parallelism()
+            .ok()
+            .and_then(|n| u32::try_from(n.get()).ok())
+            .unwrap_or(1)
+    });
+    if n == 0 || n > 1024 {
+        return Err(Failure::Usage(anyhow!(
+            "--workers {n}: must be in 1..=1024"
+        )));
+    }
+    let endpoint = match listen {
+        Some(e) if e.starts_with("tcp/127.") || e.starts_with("tcp/[::1]") => e.to_string(),
+        Some(e) => {
+            return Err(Failure::Usage(anyhow!(
+                "--listen `{e}`: `run` serves on loopback only (tcp/127.0.0.1:PORT); use `coordinator` and `worker` for a cluster"
+            )))
+        }
+        None => format!(
+            "tcp/127.0.0.1:{}",
+            free_loopback_port().map_err(Failure::Job)?
+        ),
+    };
+    eprintln!("zenoh on {endpoint}; watch from another terminal with `naofarm watch RUN --connect {endpoint}`");
+    let coord_net = NetArgs {
+        listen: vec![endpoint.clone()],
+        prefix: protocol::keys::DEFAULT_PREFIX.to_string(),
+        ..NetArgs::default()
+    };
+    let worker_net = NetArgs {
+        connect: vec![endpoint],
+        listen: vec![],
+        prefix: protocol::keys::DEFAULT_PREFIX.to_string(),
+        config: None,
+    };
+    let ccfg = coord_net.zenoh_config(&[]).map_err(Failure::Job)?;
+    let (run, effects) = open_run(job)?;
+    let rt = runtime()?;
+    rt.block_on(async {
+        let session = open_session(ccfg).await?;
+        let shutdown = signals();
+        let mut handles = Vec::new();
+        let mut worker_sessions = Vec::new();
+        for _ in 0..n {
+            let wcfg = worker_net.zenoh_config(&[]).map_err(Failure::Job)?;
+            let ws = open_session(wcfg).await?;
+            worker_sessions.push(ws.clone());
+            let cfg = worker::service::WorkerConfig {
+                slots: 1,
+                ..worker::service::WorkerConfig::default()
+            };
+            handles.push(tokio::spawn(worker::service::serve(
+                ws,
+                cfg,
+                shutdown.clone(),
+            )));
+        }
+        let (ended, view) = serve_with_view(
+            &session,
+            (run, effects),
+            job,
+            protocol::keys::DEFAULT_PREFIX,
+            shutdown,
+            json,
+        )
+        .await;
+        for ws in &worker_sessions {
+            let _ = ws.close().await;
+        }
+        for h in handles {
+            h.abort();
+        }
+        let _ = session.close().await;
+        let ended = ended.map_err(|e| Failure::Job(e.into()))?;
+        summary(&job.out, &ended, view)
+    })
+}

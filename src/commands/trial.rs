@@ -1,0 +1,287 @@
+//! `naofarm trial`: n noisy walking trials of one parameter set, locally (the
+//! Table IV row), or one farm trial replayed from its run's journal.
+
+use std::time::Instant;
+
+use anyhow::anyhow;
+use protocol::{measurement::Measurement, params::ParamValues, pickout::stats};
+use worker::nao::{
+    model::NaoModel,
+    sim::{SimSettings, CYCLE_S},
+    trial::{self, NaoTrial},
+};
+
+use crate::{
+    args::TrialArgs,
+    common::{parse_params, Failure},
+};
+
+/// `naofarm trial`: n trials of one parameter set, the Table IV row.
+pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
+    if let (Some(dir), Some(i), Some(k)) = (&a.run_dir, a.iteration, a.trial) {
+        return replay(a, dir, i, k);
+    }
+    if a.set != "expert" {
+        return Err(Failure::Usage(anyhow!(
+            "--set `{}`: the only named set is `expert`",
+            a.set
+        )));
+    }
+    if a.trials == 0 || a.trials > 100_000 {
+        return Err(Failure::Usage(anyhow!("--trials must be in 1..=100000")));
+    }
+    if !(a.duration.is_finite() && a.duration > 0.0 && a.duration <= 600.0) {
+        return Err(Failure::Usage(anyhow!("--duration must be in (0, 600] s")));
+    }
+    let params = parse_params(&a.params)?;
+    let values = ParamValues::from_named(&params).map_err(|e| Failure::Usage(e.into()))?;
+    NaoModel::with_params(a.robot_type, &values).map_err(|e| Failure::Usage(e.into()))?;
+    if a.threads.is_some_and(|t| t == 0 || t > 1024) {
+        return Err(Failure::Usage(anyhow!("--threads must be in 1..=1024")));
+    }
+    let threads = a
+        .threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from));
+    let d = protocol::Physics::default();
+    let physics = protocol::Physics {
+        substeps: a.substeps.unwrap_or(d.substeps),
+        solver_iterations: a.solver_iterations.unwrap_or(d.solver_iterations),
+        pgs_iterations: a.pgs_iterations.unwrap_or(d.pgs_iterations),
+        armature_kg_m2: a.armature.unwrap_or(d.armature_kg_m2),
+    };
+    physics.validate().map_err(|(field, m)| {
+        let flag = field.trim_end_matches("_kg_m2").replace('_', "-");
+        Failure::Usage(anyhow!("--{flag}: {m}"))
+    })?;
+    let settings = SimSettings::with_physics(&physics);
+    if let Some(path) = &a.record {
+        let what = Recording {
+            robot_type: a.robot_type,
+            seed: a.seed,
+            duration: a.duration,
+            params: &params,
+            values: &values,
+        };
+        record(path, &what, settings)?;
+    }
+    let t0 = Instant::now();
+    let runs = trial::run_many(
+        a.robot_type,
+        &values,
+        a.seed,
+        a.trials,
+        a.duration,
+        threads,
+        settings,
+    )
+    .map_err(|e| Failure::Job(e.into()))?;
+    let wall = t0.elapsed().as_secs_f64();
+    let results: Vec<_> = runs.iter().map(|t| t.measurement).collect();
+    let s = stats(&results);
+    let diverged = runs.iter().filter(|t| t.diverged).count();
+    if a.json {
+        let v = serde_json::json!({
+            "params": params_json(&params),
+            "robot_type": a.robot_type,
+            "s": s.s,
+            "mx": s.mx,
+            "my": s.my,
+            "ex": s.ex,
+            "ey": s.ey,
+            "trials": runs.iter().map(trial_json).collect::<Vec<_>>(),
+            "diverged": diverged,
+            "wall_s": wall,
+        });
+        outln!("{v}");
+    } else {
+        let f = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.3}"));
+        outln!(
+            "     s     mx     my     ex     ey   (m; {} trials of {} s)",
+            a.trials,
+            a.duration
+        );
+        outln!(
+            "{:6.2} {:>6} {:>6} {:>6} {:>6}",
+            s.s,
+            f(s.mx),
+            f(s.my),
+            f(s.ex),
+            f(s.ey)
+        );
+        if diverged > 0 {
+            outln!("{diverged} of the falls were the physics diverging (counted as falls, no distance)");
+        }
+        outln!(
+            "{:.1} trials/s on {threads} threads ({wall:.2} s wall)",
+            a.trials as f64 / wall
+        );
+    }
+    Ok(())
+}
+
+/// Whether two measurements are the same to the bit.
+fn same_bits(a: &Measurement, b: &Measurement) -> bool {
+    a.fell == b.fell
+        && a.x_m.to_bits() == b.x_m.to_bits()
+        && a.y_m.to_bits() == b.y_m.to_bits()
+        && a.fall_time_s.map(f64::to_bits) == b.fall_time_s.map(f64::to_bits)
+        && a.sim_time_s.to_bits() == b.sim_time_s.to_bits()
+}
+
+fn measurement_json(m: &Measurement) -> serde_json::Value {
+    serde_json::json!({
+        "fell": m.fell,
+        "x_m": m.x_m,
+        "y_m": m.y_m,
+        "fall_time_s": m.fall_time_s,
+        "sim_time_s": m.sim_time_s,
+    })
+}
+
+/// `naofarm trial --run DIR --iteration I --trial K`: re-runs a farm trial
+/// exactly as its worker did, and compares it with the journal.
+fn replay(a: &TrialArgs, dir: &std::path::Path, iteration: u64, k: u32) -> Result<(), Failure> {
+    use coordinator::run::{farm_trial, RunError};
+    let ft = farm_trial(dir, iteration, k).map_err(|e| match e {
+        RunError::Refused(_) => Failure::Usage(anyhow!("--run {}: {e}", dir.display())),
+        RunError::Journal(coordinator::journal::JournalError::Io { .. }) => {
+            Failure::Usage(e.into())
+        }
+        e => Failure::Job(e.into()),
+    })?;
+    let req = &ft.request;
+    let values = ParamValues::from_named(&req.params).map_err(|e| Failure::Job(e.into()))?;
+    if let Some(path) = &a.record {
+        if req.model != protocol::TrialModel::Nao {
+            return Err(Failure::Usage(anyhow!(
+                "--record: the run's model is {:?}; only NAO trials have poses",
+                req.model
+            )));
+        }
+        let what = Recording {
+            robot_type: req.robot_type,
+            seed: req.seed,
+            duration: req.duration_s,
+            params: &req.params,
+            values: &values,
+        };
+        record(path, &what, SimSettings::with_physics(&req.physics))?;
+    }
+    let m = worker::run_trial(req).map_err(|e| Failure::Job(e.into()))?;
+    let same = ft.journaled.as_ref().map(|(j, _)| same_bits(j, &m));
+    if a.json {
+        outln!(
+            "{}",
+            serde_json::json!({
+                "run": req.run,
+                "iteration": iteration,
+                "trial": k,
+                "seed": req.seed,
+                "robot_type": req.robot_type,
+                "params": params_json(&req.params),
+                "replayed": measurement_json(&m),
+                "journaled": ft.journaled.as_ref().map(|(j, _)| measurement_json(j)),
+                "worker": ft.journaled.as_ref().map(|(_, w)| w),
+                "identical": same,
+            })
+        );
+    } else {
+        let line = |m: &Measurement| {
+            format!(
+                "x {} m, y {} m, {}",
+                m.x_m,
+                m.y_m,
+                m.fall_time_s
+                    .map_or("no fall".to_string(), |t| format!("fell at {t} s"))
+            )
+        };
+        outln!(
+            "run `{}` iteration {iteration} trial {k} (seed {}): {}",
+            req.run,
+            req.seed,
+            line(&m)
+        );
+        match &ft.journaled {
+            Some((j, w)) => outln!(
+                "journaled by worker {w}: {} — {}",
+                line(j),
+                if same == Some(true) {
+                    "identical to the bit"
+                } else {
+                    "DIFFERENT"
+                }
+            ),
+            None => outln!("not journaled yet (the trial has not been run on the farm)"),
+        }
+    }
+    if same == Some(false) {
+        return Err(Failure::Job(anyhow!(
+            "the replay of iteration {iteration} trial {k} differs from the journal \
+             (another build or CPU than the worker that ran it?)"
+        )));
+    }
+    Ok(())
+}
+
+/// One trial as `trial --json` lists it.
+fn trial_json(t: &NaoTrial) -> serde_json::Value {
+    let m = &t.measurement;
+    serde_json::json!({
+        "seed": t.seed,
+        "fell": m.fell,
+        "x": m.x_m,
+        "y": m.y_m,
+        "fall_time_s": m.fall_time_s,
+        "diverged": t.diverged,
+        "sim_time_s": m.sim_time_s,
+    })
+}
+
+/// A parameter set as a JSON object of name → value.
+fn params_json(params: &[(String, f64)]) -> serde_json::Map<String, serde_json::Value> {
+    params
+        .iter()
+        .map(|(k, v)| (k.clone(), serde_json::json!(v)))
+        .collect()
+}
+
+/// One trial to record: which robot, seed, duration and parameters.
+#[derive(Clone, Copy)]
+struct Recording<'a> {
+    robot_type: u8,
+    seed: u64,
+    duration: f64,
+    params: &'a [(String, f64)],
+    values: &'a ParamValues,
+}
+
+/// Writes the replay of one trial: a header line (robot type, seed,
+/// parameters, body names and shapes), then one line per cycle with the time
+/// and every body's centre pose (x, y, z, qx, qy, qz, qw; world frame, m).
+fn record(
+    path: &std::path::Path,
+    what: &Recording<'_>,
+    settings: SimSettings,
+) -> Result<(), Failure> {
+    let file = std::fs::File::create(path)
+        .map_err(|e| Failure::Usage(anyhow!("--record {}: {e}", path.display())))?;
+    let mut out = std::io::BufWriter::new(file);
+    let t = worker::nao::replay::write(
+        &mut out,
+        what.robot_type,
+        what.seed,
+        what.duration,
+        what.params,
+        what.values,
+        settings,
+    )
+    .map_err(|e| Failure::Job(anyhow!("--record {}: {e}", path.display())))?;
+    eprintln!(
+        "recorded seed {} ({} cycles{}) to {}",
+        what.seed,
+        (t.measurement.sim_time_s / CYCLE_S).round(),
+        if t.measurement.fell { ", fell" } else { "" },
+        path.display()
+    );
+    Ok(())
+}

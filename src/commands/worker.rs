@@ -1,0 +1,47 @@
+//! `naofarm worker`: a stateless worker (cluster use).
+
+use std::time::Duration;
+
+use anyhow::anyhow;
+
+use crate::{
+    args::NetArgs,
+    common::Failure,
+    net::open_session,
+    serve::{runtime, signals},
+};
+
+/// `naofarm worker`.
+pub fn worker(net: &NetArgs, slots: Option<u32>, min_trial_ms: u64) -> Result<(), Failure> {
+    if min_trial_ms > 3_600_000 {
+        return Err(Failure::Usage(anyhow!(
+            "--min-trial-ms {min_trial_ms}: must be at most 3600000"
+        )));
+    }
+    let cfg = net.zenoh_config(&[]).map_err(Failure::Usage)?;
+    let mut wcfg = worker::service::WorkerConfig {
+        prefix: net.prefix.clone(),
+        min_trial: Duration::from_millis(min_trial_ms),
+        ..worker::service::WorkerConfig::default()
+    };
+    if let Some(s) = slots {
+        if s == 0 || s > 4096 {
+            return Err(Failure::Usage(anyhow!("--slots must be in 1..=4096")));
+        }
+        wcfg.slots = s;
+    }
+    let rt = runtime()?;
+    rt.block_on(async {
+        let session = open_session(cfg).await?;
+        let shutdown = signals();
+        let s = worker::service::serve(session.clone(), wcfg, shutdown)
+            .await
+            .map_err(|e| Failure::Job(e.into()))?;
+        let _ = session.close().await;
+        eprintln!(
+            "worker stopped: {} trials run, {} refused",
+            s.trials, s.refused
+        );
+        Ok(())
+    })
+}

@@ -1,0 +1,79 @@
+//! What every command shares: the exit-code failure, reading an experiment
+//! file, parsing NAME=VALUE parameters. A leaf: it uses no command module.
+
+use std::path::Path;
+
+use anyhow::Context;
+use protocol::Experiment;
+
+/// Exit-code classes: 2 for usage or configuration errors, 1 for a failed job.
+pub enum Failure {
+    /// Bad arguments, a bad file: exit 2.
+    Usage(anyhow::Error),
+    /// The job itself failed: exit 1.
+    Job(anyhow::Error),
+}
+
+/// Writes `text` to stdout; a closed pipe (`| head`) ends quietly.
+pub fn emit(text: &str) -> Result<(), Failure> {
+    crate::out::write(text);
+    Ok(())
+}
+
+/// Reads and validates an experiment file (a usage error when it is bad).
+pub fn load_experiment(path: &Path) -> Result<(Experiment, String), Failure> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read {}", path.display()))
+        .map_err(Failure::Usage)?;
+    let e = Experiment::from_toml(&text)
+        .with_context(|| format!("{}", path.display()))
+        .map_err(Failure::Usage)?;
+    Ok((e, text))
+}
+
+pub fn parse_params(params: &[String]) -> Result<Vec<(String, f64)>, Failure> {
+    params
+        .iter()
+        .map(|p| {
+            let (name, value) = p.split_once('=').ok_or_else(|| {
+                Failure::Usage(anyhow::anyhow!("--param `{p}`: expected NAME=VALUE"))
+            })?;
+            let v: f64 = value.trim().parse().map_err(|_| {
+                Failure::Usage(anyhow::anyhow!("--param `{p}`: `{value}` is not a number"))
+            })?;
+            if !v.is_finite() {
+                return Err(Failure::Usage(anyhow::anyhow!(
+                    "--param `{p}`: not a finite number"
+                )));
+            }
+            Ok((name.trim().to_string(), v))
+        })
+        .collect()
+}
+
+/// The league's type `robot_type` with morphology overrides NAME=VALUE (a
+/// walk parameter or an unknown name is a usage error).
+pub fn morphology(
+    robot_type: u8,
+    params: &[String],
+) -> Result<worker::nao::model::Morphology, Failure> {
+    use worker::nao::model::{ModelError, Morphology};
+    let mut m = Morphology::of_type(robot_type).map_err(|e| Failure::Usage(e.into()))?;
+    for (name, v) in parse_params(params)? {
+        let p = protocol::params::find(&name).ok_or(ModelError::Unknown(name.clone()));
+        p.and_then(|p| m.set(p.param, v))
+            .map_err(|e| Failure::Usage(e.into()))?;
+    }
+    Ok(m)
+}
+
+/// Says on stderr what a torn tail means, unless the run is live (then it is in progress).
+pub fn note_tail(dir: &Path, view: &coordinator::run::RunView) {
+    if let (coordinator::journal::Tail::Torn { offset, len }, false) = (&view.tail, view.live) {
+        eprintln!(
+            "note: {}: the last {len} bytes (from offset {offset}) are an interrupted append; \
+             resuming the run saves them to journal.nfj.torn-{offset} and cuts them",
+            coordinator::journal::Journal::path_in(dir).display()
+        );
+    }
+}
