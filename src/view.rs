@@ -46,8 +46,9 @@ fn best_line(b: &Best, sep: &str) -> String {
     )
 }
 
-fn json_of(text: &str) -> serde_json::Value {
-    serde_json::from_str(text).unwrap_or_default()
+/// A message as a JSON value (one that cannot be encoded says so, never null).
+fn json_of<T: serde::Serialize>(m: &T) -> serde_json::Value {
+    serde_json::to_value(m).unwrap_or_else(|e| serde_json::json!({ "unencodable": e.to_string() }))
 }
 
 impl View {
@@ -92,7 +93,7 @@ impl View {
                 continue;
             }
             if self.json {
-                self.event(&serde_json::json!({"event": "history", "result": json_of(&protocol::WireMessage::to_json(r))}));
+                self.event(&serde_json::json!({"event": "history", "result": json_of(r)}));
             }
         }
         if !self.json && !results.is_empty() {
@@ -109,7 +110,7 @@ impl View {
             return false;
         }
         if self.json {
-            self.event(&serde_json::json!({"event": "decided", "result": json_of(&protocol::WireMessage::to_json(r))}));
+            self.event(&serde_json::json!({"event": "decided", "result": json_of(r)}));
         } else {
             self.line(&format!(
                 "iteration {:>4} {:<10} s {:.2} mx {} my {} ex {}",
@@ -132,14 +133,14 @@ impl View {
     /// A trial outcome (JSON view only; the terminal view shows rates instead).
     pub fn trial(&self, o: &TrialOutcome) {
         if self.json {
-            self.event(&serde_json::json!({"event": "trial", "outcome": json_of(&protocol::WireMessage::to_json(o))}));
+            self.event(&serde_json::json!({"event": "trial", "outcome": json_of(o)}));
         }
     }
 
     /// The run's status after an event.
     pub fn status(&mut self, s: &RunStatus) {
         if self.json {
-            self.event(&serde_json::json!({"event": "status", "status": json_of(&protocol::WireMessage::to_json(s))}));
+            self.event(&serde_json::json!({"event": "status", "status": json_of(s)}));
             return;
         }
         let first = *self.decided_at_start.get_or_insert(s.decided);
@@ -168,7 +169,7 @@ impl View {
     /// Optim.2 (CLOP's mean, the best-average agent); `extra` joins the JSON line.
     pub fn finish(&mut self, s: &RunStatus, extra: serde_json::Value) {
         if self.json {
-            let mut line = serde_json::json!({"event": "finished", "status": json_of(&protocol::WireMessage::to_json(s))});
+            let mut line = serde_json::json!({"event": "finished", "status": json_of(s)});
             if let (Some(obj), serde_json::Value::Object(more)) = (line.as_object_mut(), extra) {
                 obj.extend(more);
             }

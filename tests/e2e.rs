@@ -978,7 +978,7 @@ mod farm {
             sim_time_s: 10.0,
             wall_time_s: 0.0,
         };
-        let mut nan = good.encode();
+        let mut nan = good.encode().unwrap();
         // Same layout with x_m's bytes replaced by NaN: find 1.0f64 and swap it.
         let one = 1.0f64.to_le_bytes();
         if let Some(i) = nan.windows(8).position(|w| w == one) {
@@ -992,22 +992,26 @@ mod farm {
                 run: "otherrun".into(),
                 ..good.clone()
             }
-            .encode(),
+            .encode()
+            .unwrap(),
             TrialOutcome {
                 iteration: 999_999,
                 ..good.clone()
             }
-            .encode(),
+            .encode()
+            .unwrap(),
             TrialOutcome {
                 trial: 77,
                 ..good.clone()
             }
-            .encode(),
+            .encode()
+            .unwrap(),
             TrialOutcome {
                 seed: 12345,
                 ..good.clone()
             }
-            .encode(),
+            .encode()
+            .unwrap(),
         ];
         for b in &bad {
             session.put(&key, b.clone()).wait().unwrap();
@@ -1257,6 +1261,53 @@ fn the_main_job_runs_five_nao_iterations() {
     )
     .to_string();
     assert!(err.contains("iteration 99 is not open"), "{err}");
+}
+
+#[test]
+fn a_closed_pipe_ends_output_quietly() {
+    // `naofarm model | head -1`, and a run whose JSON events (over 100 kB,
+    // more than a pipe holds) lose their reader after one line: each ends
+    // with 0 and no panic, and the run goes on to its end.
+    let dir = scratch("pipe");
+    let run_dir = dir.join("run").display().to_string();
+    let exp = root()
+        .join("experiments/synthetic.toml")
+        .display()
+        .to_string();
+    for args in [
+        vec!["model".to_string()],
+        vec!["model".into(), "--json".into()],
+        vec![
+            "run".into(),
+            "--json".into(),
+            exp,
+            "--out".into(),
+            run_dir.clone(),
+        ],
+    ] {
+        use std::io::BufRead;
+        let mut child = naofarm()
+            .args(&args)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut first = String::new();
+        std::io::BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut first)
+            .unwrap();
+        assert!(!first.is_empty());
+        let out = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(0), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+    let h = succeed(naofarm().args(["history", "--csv", &run_dir]));
+    assert_eq!(
+        String::from_utf8_lossy(&h.stdout).lines().count(),
+        61,
+        "the run went on"
+    );
 }
 
 #[test]

@@ -285,12 +285,7 @@ pub async fn serve(
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
         if st.finished {
-            put_json(
-                &session,
-                &keys::status(&prefix, &name),
-                &st.status().to_json(),
-            )
-            .await;
+            publish(&session, &keys::status(&prefix, &name), &st.status()).await;
             return Ok(Ended::Finished(st.counters));
         }
         tokio::select! {
@@ -352,17 +347,11 @@ pub async fn serve(
             }
             q = status_q.recv_async() => {
                 let q = q.map_err(zerr)?;
-                let body = st.status().to_json();
-                if let Err(e) = q.reply(q.key_expr().clone(), body).encoding(Encoding::APPLICATION_JSON).await {
-                    tracing::warn!(error = %e, "status reply failed");
-                }
+                reply_json(&q, st.status().to_json().map_err(|e| e.to_string())).await;
             }
             q = history_q.recv_async() => {
                 let q = q.map_err(zerr)?;
-                let body = serde_json::to_string(&st.history).unwrap_or_default();
-                if let Err(e) = q.reply(q.key_expr().clone(), body).encoding(Encoding::APPLICATION_JSON).await {
-                    tracing::warn!(error = %e, "history reply failed");
-                }
+                reply_json(&q, serde_json::to_string(&st.history).map_err(|e| e.to_string())).await;
             }
             _ = tick.tick() => {
                 let t = st.sched.tick(Instant::now());
@@ -388,10 +377,35 @@ pub async fn serve(
     }
 }
 
-async fn put_json(session: &Session, key: &str, body: &str) {
+/// Answers a query with a JSON body; a body that could not be encoded is
+/// logged and not answered (the querier sees no reply, never an empty one).
+async fn reply_json(q: &zenoh::query::Query, body: Result<String, String>) {
+    match body {
+        Ok(body) => {
+            if let Err(e) = q
+                .reply(q.key_expr().clone(), body)
+                .encoding(Encoding::APPLICATION_JSON)
+                .await
+            {
+                tracing::warn!(error = %e, "a query reply failed");
+            }
+        }
+        Err(e) => tracing::error!(error = %e, "a query was not answered"),
+    }
+}
+
+/// Publishes a watched message in its JSON form (one that cannot be encoded is logged, not sent).
+async fn publish<M: WireMessage>(session: &Session, key: &str, message: &M) {
+    match message.to_json() {
+        Ok(body) => put_json(session, key, body).await,
+        Err(e) => tracing::error!(key, error = %e, "not published"),
+    }
+}
+
+async fn put_json(session: &Session, key: &str, body: String) {
     // Block, not drop, under congestion: watchers count on every result.
     if let Err(e) = session
-        .put(key, body.to_string())
+        .put(key, body)
         .encoding(Encoding::APPLICATION_JSON)
         .congestion_control(zenoh::qos::CongestionControl::Block)
         .await
@@ -427,10 +441,10 @@ async fn on_outcome(
             st.trials_done += 1;
             st.sched.forget(t);
             let prefix = st.cfg.prefix.clone();
-            put_json(
+            publish(
                 session,
                 &keys::trial(&prefix, &o.run, o.iteration, o.trial),
-                &o.to_json(),
+                &o,
             )
             .await;
             handle_effects(session, st, effects, events).await?;
@@ -469,7 +483,7 @@ async fn handle_effects(
                 put_json(
                     session,
                     &keys::params(&prefix, &name, o.iteration),
-                    &json.to_string(),
+                    json.to_string(),
                 )
                 .await;
                 st.opened.insert(o.iteration, o);
@@ -477,14 +491,9 @@ async fn handle_effects(
             Effect::Decided(d) => {
                 st.opened.remove(&d.iteration);
                 let r = st.result_of(&d);
-                put_json(
-                    session,
-                    &keys::results(&prefix, &name, d.iteration),
-                    &r.to_json(),
-                )
-                .await;
+                publish(session, &keys::results(&prefix, &name, d.iteration), &r).await;
                 let status = st.status();
-                put_json(session, &keys::status(&prefix, &name), &status.to_json()).await;
+                publish(session, &keys::status(&prefix, &name), &status).await;
                 st.history.push(r.clone());
                 if let Some(tx) = events {
                     let _ = tx.send(Event::Decided(Box::new(r), Box::new(status)));
@@ -516,10 +525,15 @@ async fn dispatch(session: &Session, st: &mut State) {
                 continue;
             }
         };
-        if let Err(e) = session
-            .put(keys::work(&st.cfg.prefix, &id), req.encode())
-            .await
-        {
+        let bytes = match req.encode() {
+            Ok(b) => b,
+            Err(e) => {
+                tracing::error!(error = %e, "a trial request cannot be encoded; dropped");
+                st.sched.forget(t);
+                continue;
+            }
+        };
+        if let Err(e) = session.put(keys::work(&st.cfg.prefix, &id), bytes).await {
             tracing::warn!(worker = %id, error = %e, "dispatch failed");
         }
     }

@@ -21,6 +21,16 @@ pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
 const MAGIC: [u8; 2] = *b"NF";
 const HEADER: usize = 4;
 
+/// A message that could not be encoded (never silently sent empty).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("cannot encode a {message}: {why}")]
+pub struct EncodeError {
+    /// The message.
+    pub message: &'static str,
+    /// The encoder's reason.
+    pub why: String,
+}
+
 /// Why bytes could not be decoded into a message.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum DecodeError {
@@ -95,17 +105,20 @@ pub trait WireMessage: Serialize + DeserializeOwned + Sized {
     fn validate(&self) -> Result<(), (&'static str, String)>;
 
     /// Encodes the message inside the envelope.
-    #[must_use]
-    fn encode(&self) -> Vec<u8> {
+    fn encode(&self) -> Result<Vec<u8>, EncodeError> {
         let mut out = Vec::with_capacity(64);
         out.extend_from_slice(&MAGIC);
         out.push(WIRE_VERSION);
         out.push(Self::KIND);
-        // Serialising plain data structs into a Vec cannot fail.
         let body =
-            bincode::serde::encode_to_vec(self, bincode::config::standard()).unwrap_or_default();
+            bincode::serde::encode_to_vec(self, bincode::config::standard()).map_err(|e| {
+                EncodeError {
+                    message: Self::NAME,
+                    why: e.to_string(),
+                }
+            })?;
         out.extend_from_slice(&body);
-        out
+        Ok(out)
     }
 
     /// Decodes and checks a message.
@@ -157,9 +170,11 @@ pub trait WireMessage: Serialize + DeserializeOwned + Sized {
     }
 
     /// The documented JSON form (for watched topics and `--json` output).
-    #[must_use]
-    fn to_json(&self) -> String {
-        serde_json::to_string(self).unwrap_or_default()
+    fn to_json(&self) -> Result<String, EncodeError> {
+        serde_json::to_string(self).map_err(|e| EncodeError {
+            message: Self::NAME,
+            why: e.to_string(),
+        })
     }
 
     /// Parses and checks the JSON form.
@@ -598,7 +613,7 @@ mod tests {
             let physics = Physics { substeps: sub, solver_iterations: its, pgs_iterations: pgs, armature_kg_m2: arm };
             let m = TrialRequest { run, iteration: i, trial: k, seed, model: TrialModel::Synthetic,
                                    robot_type: t, duration_s: d, params: ps, dispatch: disp, physics };
-            prop_assert_eq!(TrialRequest::decode(&m.encode()), Ok(m));
+            prop_assert_eq!(TrialRequest::decode(&m.encode().unwrap()), Ok(m));
         }
 
         #[test]
@@ -606,25 +621,25 @@ mod tests {
                                      x in -100.0f64..100.0, y in -100.0f64..100.0, t in 0.0f64..10.0) {
             let m = TrialOutcome { run, iteration: i, trial: k, seed: 7, dispatch: 1, worker: "w".into(), fell,
                                    x_m: x, y_m: y, fall_time_s: fell.then_some(t), sim_time_s: t, wall_time_s: 0.5 };
-            prop_assert_eq!(TrialOutcome::decode(&m.encode()), Ok(m));
+            prop_assert_eq!(TrialOutcome::decode(&m.encode().unwrap()), Ok(m));
         }
 
         #[test]
         fn iteration_result_round_trips(run in run(), i in any::<u64>(), ps in params(), st in stats(), best in any::<bool>()) {
             let m = IterationResult { run, iteration: i, params: ps.clone(), stats: st.clone(), decision: Decision::Equivalent,
                                       best: best.then_some(Best { iteration: i, params: ps, stats: st }) };
-            prop_assert_eq!(IterationResult::decode(&m.encode()), Ok(m.clone()));
-            prop_assert_eq!(IterationResult::from_json(&m.to_json()), Ok(m));
+            prop_assert_eq!(IterationResult::decode(&m.encode().unwrap()), Ok(m.clone()));
+            prop_assert_eq!(IterationResult::from_json(&m.to_json().unwrap()), Ok(m));
         }
 
         #[test]
         fn presence_and_status_round_trip(w in run(), slots in 1u32..64, a in 0u64..100, e in 0u64..100, r in 0u64..100, ps in params()) {
             let p = WorkerPresence { worker: w.clone(), slots, busy: slots / 2, version: "0.1.0".into() };
-            prop_assert_eq!(WorkerPresence::decode(&p.encode()), Ok(p));
+            prop_assert_eq!(WorkerPresence::decode(&p.encode().unwrap()), Ok(p));
             let s = RunStatus { run: w, planned: 500, opened: a + e + r + 2, decided: a + e + r, accepts: a,
                                 equivalents: e, rejects: r, best: None, optim2: ps, workers: 3, trials_per_s: 1.5, finished: false };
-            prop_assert_eq!(RunStatus::decode(&s.encode()), Ok(s.clone()));
-            prop_assert_eq!(RunStatus::from_json(&s.to_json()), Ok(s));
+            prop_assert_eq!(RunStatus::decode(&s.encode().unwrap()), Ok(s.clone()));
+            prop_assert_eq!(RunStatus::from_json(&s.to_json().unwrap()), Ok(s));
         }
 
         #[test]
@@ -667,26 +682,28 @@ mod tests {
 
     #[test]
     fn rejects_trailing_bytes_version_kind_and_nan() {
-        let mut b = outcome().encode();
+        let mut b = outcome().encode().unwrap();
         b.push(0);
         assert!(matches!(
             TrialOutcome::decode(&b),
             Err(DecodeError::Trailing { extra: 1, .. })
         ));
-        let mut b = outcome().encode();
+        let mut b = outcome().encode().unwrap();
         b[2] = 9;
         assert!(matches!(
             TrialOutcome::decode(&b),
             Err(DecodeError::Version { found: 9, .. })
         ));
-        let b = outcome().encode();
+        let b = outcome().encode().unwrap();
         assert!(matches!(
             TrialRequest::decode(&b),
             Err(DecodeError::WrongKind { .. })
         ));
         let mut o = outcome();
         o.x_m = f64::NAN;
-        let e = TrialOutcome::decode(&o.encode()).unwrap_err().to_string();
+        let e = TrialOutcome::decode(&o.encode().unwrap())
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("TrialOutcome") && e.contains("x_m"), "{e}");
         let huge = vec![0u8; MAX_MESSAGE_BYTES + 1];
         assert!(matches!(
@@ -720,7 +737,9 @@ mod tests {
             dispatch: 0,
             physics: Physics::default(),
         };
-        let e = TrialRequest::decode(&r.encode()).unwrap_err().to_string();
+        let e = TrialRequest::decode(&r.encode().unwrap())
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("ThighRelHip2_Z"), "{e}");
         let r = TrialRequest {
             params: vec![("ThighRelHip2_Z".into(), -0.04)],
@@ -730,7 +749,9 @@ mod tests {
             },
             ..r
         };
-        let e = TrialRequest::decode(&r.encode()).unwrap_err().to_string();
+        let e = TrialRequest::decode(&r.encode().unwrap())
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("substeps"), "{e}");
     }
 }

@@ -111,7 +111,10 @@ async fn list(
     }
     for s in &runs {
         if json {
-            outln!("{}", s.to_json());
+            match s.to_json() {
+                Ok(text) => outln!("{text}"),
+                Err(e) => return Err(Failure::Job(e.into())),
+            }
         } else {
             outln!(
                 "{:<24} {:>5}/{:<5} decided  A {} E {} R {}  {} workers  {:.1} trials/s{}",

@@ -64,6 +64,18 @@ pub struct WorkerSummary {
     pub refused: u64,
 }
 
+/// Sends a message; one that cannot be encoded or sent is logged.
+async fn put_message<M: WireMessage>(session: &Session, key: &str, m: &M) {
+    match m.encode() {
+        Ok(bytes) => {
+            if let Err(e) = session.put(key, bytes).await {
+                tracing::warn!(key, error = %e, "publishing failed");
+            }
+        }
+        Err(e) => tracing::error!(key, error = %e, "not published"),
+    }
+}
+
 /// The text of a panic's payload.
 fn panic_text(p: Box<dyn std::any::Any + Send>) -> String {
     p.downcast_ref::<&str>()
@@ -106,9 +118,7 @@ pub async fn serve(
                     busy: busy.load(Ordering::Relaxed).min(cfg.slots),
                     version: env!("CARGO_PKG_VERSION").to_string(),
                 };
-                if let Err(e) = session.put(&presence_key, p.encode()).await {
-                    tracing::warn!(error = %e, "heartbeat failed");
-                }
+                put_message(&session, &presence_key, &p).await;
             }
             s = work.recv_async() => {
                 let Ok(s) = s else { break };
@@ -150,9 +160,7 @@ pub async fn serve(
                     match result {
                         Ok(m) => {
                             let o = TrialOutcome::answer(&asked, id, m, started.elapsed().as_secs_f64());
-                            if let Err(e) = session.put(keys::outcomes(&prefix), o.encode()).await {
-                                tracing::warn!(error = %e, "publishing an outcome failed");
-                            }
+                            put_message(&session, &keys::outcomes(&prefix), &o).await;
                             true
                         }
                         Err(reason) => {
@@ -166,9 +174,7 @@ pub async fn serve(
                                 worker: id,
                                 reason,
                             };
-                            if let Err(e) = session.put(keys::failures(&prefix), f.encode()).await {
-                                tracing::warn!(error = %e, "publishing a failure failed");
-                            }
+                            put_message(&session, &keys::failures(&prefix), &f).await;
                             false
                         }
                     }

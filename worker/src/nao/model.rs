@@ -811,12 +811,22 @@ mod tests {
             assert!(close(m.torso_height_standing(), w.4, 1e-6), "t{t}");
         }
         let t4 = NaoModel::new(Morphology::of_type(4).unwrap()).unwrap();
-        assert_eq!(t4.joints.len(), 24);
-        assert!(
-            NaoModel::new(Morphology::of_type(5).unwrap_or(Morphology::of_type(0).unwrap()))
-                .is_ok()
-        );
-        assert!(Morphology::of_type(5).is_err());
+        assert_eq!(t4.joints.len(), 24, "type 4 has toes");
+        let t0 = NaoModel::new(Morphology::of_type(0).unwrap()).unwrap();
+        assert_eq!(t0.joints.len(), 22);
+        // Type 2's ankles: their own speeds; every other type's are the default.
+        for t in 0..5u8 {
+            let m = NaoModel::new(Morphology::of_type(t).unwrap()).unwrap();
+            for j in &m.joints {
+                let want = match (t, &j.name[1..]) {
+                    (2, "le5") => 8.80667,
+                    (2, "le6") => 3.47234,
+                    _ => MAX_SPEED,
+                };
+                assert_eq!(j.max_speed_rad_s, want, "type {t} {}", j.name);
+            }
+        }
+        assert!(matches!(Morphology::of_type(5), Err(ModelError::Type(5))));
     }
 
     #[test]
