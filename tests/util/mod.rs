@@ -105,3 +105,35 @@ impl Drop for Proc {
         }
     }
 }
+
+/// The JSON lines of `run --json` / `coordinator --json` / `watch --json`:
+/// the decided iterations' results (history first), the last status, and
+/// the final `finished` line.
+pub struct Events {
+    pub history: Vec<serde_json::Value>,
+    pub decided: Vec<serde_json::Value>,
+    pub status: Option<serde_json::Value>,
+    pub finished: Option<serde_json::Value>,
+}
+
+pub fn events(stdout: &[u8]) -> Events {
+    let mut e = Events {
+        history: Vec::new(),
+        decided: Vec::new(),
+        status: None,
+        finished: None,
+    };
+    for l in String::from_utf8_lossy(stdout).lines() {
+        let v: serde_json::Value =
+            serde_json::from_str(l).unwrap_or_else(|err| panic!("{err}: {l}"));
+        match v["event"].as_str() {
+            Some("history") => e.history.push(v["result"].clone()),
+            Some("decided") => e.decided.push(v["result"].clone()),
+            Some("status") => e.status = Some(v["status"].clone()),
+            Some("finished") => e.finished = Some(v),
+            Some("trial") => {}
+            other => panic!("unknown event {other:?}: {l}"),
+        }
+    }
+    e
+}

@@ -1,0 +1,523 @@
+//! End-to-end tests of the single-machine commands (check, run, history,
+//! model, stand, trial, deploy configs): the `naofarm` binary as a real process.
+#![allow(clippy::unwrap_used)]
+
+mod util;
+
+use util::{events, naofarm, root, scratch, succeed};
+
+#[test]
+fn check_prints_the_five_parameters_with_the_papers_bounds() {
+    let out = naofarm()
+        .arg("check")
+        .arg(root().join("experiments/physical-technical.toml"))
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for (name, lo, hi) in [
+        ("ThighRelHip2_Z", "-0.08", "-0.03"),
+        ("ratio_flexion", "0.6", "0.95"),
+        ("long_offset_MidAnkles_2_Torso_Init", "0.001", "0.03"),
+        ("height_lift", "0.025", "0.07"),
+        ("xlength_step_max", "0.02", "0.15"),
+    ] {
+        let line = text
+            .lines()
+            .find(|l| l.contains(name))
+            .unwrap_or_else(|| panic!("{name} missing:\n{text}"));
+        assert!(line.contains(&format!("[{lo}, {hi}]")), "{line}");
+    }
+}
+
+#[test]
+fn check_json_is_machine_readable() {
+    let out = naofarm()
+        .args(["check", "--json"])
+        .arg(root().join("experiments/physical.toml"))
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["parameter"][0]["name"], "ThighRelHip2_Z");
+    assert_eq!(v["parameter"][0]["lower"], -0.10);
+}
+
+#[test]
+fn malformed_experiments_exit_2_naming_the_problem() {
+    let good = std::fs::read_to_string(root().join("experiments/physical-technical.toml")).unwrap();
+    let dir = scratch("check");
+    let cases = [
+        ("seed = 1", "seed = 1\nspeed = 3", "speed"),
+        ("lower = -0.08", "lower = -0.02", "parameter[0].lower"),
+        ("expert = 0.730", "expert = 0.99", "parameter[1].expert"),
+        ("beta = 1.0", "beta = 3.5", "pickout.beta"),
+        (
+            "trials_per_iteration = 10",
+            "trials_per_iteration = 0",
+            "trials_per_iteration",
+        ),
+        (
+            "name = \"height_lift\"",
+            "name = \"lift_height\"",
+            "unknown parameter `lift_height`",
+        ),
+        ("lower = 0.60", "lower = nan", "parameter[1].lower"),
+        ("seed = 1", "seed = ", "line"),
+    ];
+    for (i, (from, to, needle)) in cases.iter().enumerate() {
+        let text = good.replacen(from, to, 1);
+        assert_ne!(text, good, "{from}");
+        let path = dir.join(format!("bad{i}.toml"));
+        std::fs::write(&path, text).unwrap();
+        let out = naofarm().arg("check").arg(&path).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{to}: {err}");
+        assert!(err.contains(needle), "{to}: {err}");
+    }
+    let out = naofarm()
+        .arg("check")
+        .arg(dir.join("missing.toml"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
+fn run_completes_a_synthetic_experiment_in_one_process() {
+    let dir = scratch("run");
+    let out = succeed(
+        naofarm()
+            .args(["run", "--json", "--workers", "2", "--iterations", "8"])
+            .arg(root().join("experiments/synthetic.toml"))
+            .arg("--out")
+            .arg(dir.join("run")),
+    );
+    let ev = events(&out.stdout);
+    let lines = ev.decided;
+    assert_eq!(lines.len(), 8);
+    let status = ev.status.expect("status lines");
+    assert_eq!(status["decided"], 8);
+    assert_eq!(status["finished"], true);
+    let finished = ev.finished.expect("a finished line with the optima");
+    let best = &finished["status"]["best"];
+    assert!(best["iteration"].is_u64(), "Optim.1: {finished}");
+    assert_eq!(
+        finished["status"]["optim2"].as_array().map(Vec::len),
+        Some(5)
+    );
+
+    // `history` exports the same H, with ν′ flagged once.
+    let h = succeed(naofarm().arg("history").arg(dir.join("run")).arg("--json"));
+    let rows: Vec<serde_json::Value> = serde_json::from_slice(&h.stdout).unwrap();
+    assert_eq!(rows.len(), 8);
+    for (row, line) in rows.iter().zip(&lines) {
+        assert_eq!(row["iteration"], line["iteration"]);
+        assert_eq!(row["mx"], line["stats"]["mx"]);
+        assert!(["ACCEPT", "EQUIVALENT", "REJECT"].contains(&row["decision"].as_str().unwrap()));
+        assert_eq!(row["params"].as_object().map(|o| o.len()), Some(5));
+    }
+    let flagged: Vec<&serde_json::Value> = rows.iter().filter(|r| r["best"] == true).collect();
+    assert_eq!(flagged.len(), 1);
+    assert_eq!(flagged[0]["iteration"], best["iteration"]);
+    let csv = succeed(naofarm().arg("history").arg(dir.join("run")).arg("--csv"));
+    let csv = String::from_utf8_lossy(&csv.stdout);
+    assert_eq!(csv.lines().count(), 9, "a header and 8 rows");
+    assert!(csv.starts_with("iteration,ThighRelHip2_Z,"));
+    let missing = naofarm()
+        .arg("history")
+        .arg(dir.join("nowhere"))
+        .output()
+        .unwrap();
+    assert_eq!(missing.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&missing.stderr).contains("journal"));
+}
+
+#[test]
+fn a_torn_journal_resumes_and_a_corrupt_one_is_refused_with_its_offset() {
+    let dir = scratch("journal-damage");
+    let exp = root().join("experiments/synthetic.toml");
+    let run = |out: &std::path::Path| {
+        naofarm()
+            .args(["run", "--json", "--workers", "1", "--iterations", "6"])
+            .arg(&exp)
+            .arg("--out")
+            .arg(out)
+            .output()
+            .unwrap()
+    };
+    let reference = dir.join("reference");
+    assert!(run(&reference).status.success());
+    let want = succeed(naofarm().arg("history").arg(&reference).arg("--csv")).stdout;
+    let journal = reference.join("journal.nfj");
+    let bytes = std::fs::read(&journal).unwrap();
+
+    // A torn tail (a crash mid-write): dropped with a warning, the run resumes.
+    let torn = dir.join("torn");
+    std::fs::create_dir_all(&torn).unwrap();
+    std::fs::write(torn.join("journal.nfj"), &bytes[..bytes.len() * 2 / 3 - 3]).unwrap();
+    let out = run(&torn);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let got = succeed(naofarm().arg("history").arg(&torn).arg("--csv")).stdout;
+    assert_eq!(
+        got, want,
+        "the resumed history equals the uninterrupted one"
+    );
+
+    // A damaged byte in the middle: refused, naming the offset; the file is kept as it was.
+    let corrupt = dir.join("corrupt");
+    std::fs::create_dir_all(&corrupt).unwrap();
+    let mut damaged = bytes.clone();
+    let middle = damaged.len() / 2;
+    damaged[middle] ^= 0x5a;
+    std::fs::write(corrupt.join("journal.nfj"), &damaged).unwrap();
+    let out = run(&corrupt);
+    assert_eq!(out.status.code(), Some(1), "{out:?}");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("damaged frame at byte offset") && err.contains("journal salvage"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(corrupt.join("journal.nfj")).unwrap(), damaged);
+}
+
+#[test]
+fn the_main_job_runs_five_nao_iterations() {
+    let dir = scratch("main-job");
+    let out = succeed(
+        naofarm()
+            .args(["run", "--json", "--iterations", "5"])
+            .arg(root().join("experiments/physical-technical.toml"))
+            .arg("--out")
+            .arg(dir.join("run")),
+    );
+    let ev = events(&out.stdout);
+    let lines = ev.decided;
+    assert_eq!(lines.len(), 5);
+    assert_eq!(
+        lines[0]["params"][0],
+        serde_json::json!(["ThighRelHip2_Z", -0.04]),
+        "the expert set first"
+    );
+    let finished = ev.finished.expect("finished line");
+    assert_eq!(finished["status"]["decided"], 5);
+    assert_eq!(finished["status"]["finished"], true);
+
+    // A farm trial replayed locally gives the journaled x, y and fall time bit for bit.
+    let run_dir = dir.join("run");
+    let journaled = coordinator::journal::Journal::read(&run_dir)
+        .unwrap()
+        .records()
+        .into_iter()
+        .find_map(|r| match r {
+            coordinator::journal::Record::Outcome {
+                iteration: 4,
+                trial: 7,
+                measurement,
+                ..
+            } => Some(measurement),
+            _ => None,
+        })
+        .expect("trial 4/7 journaled");
+    let record = dir.join("replay.jsonl");
+    let out = succeed(
+        naofarm()
+            .args([
+                "trial",
+                "--json",
+                "--iteration",
+                "4",
+                "--trial",
+                "7",
+                "--run",
+            ])
+            .arg(&run_dir)
+            .arg("--record")
+            .arg(&record),
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["identical"], true, "{v}");
+    let bits = |x: &serde_json::Value| x.as_f64().map(f64::to_bits);
+    assert_eq!(bits(&v["replayed"]["x_m"]), Some(journaled.x_m.to_bits()));
+    assert_eq!(bits(&v["replayed"]["y_m"]), Some(journaled.y_m.to_bits()));
+    assert_eq!(
+        v["replayed"]["fall_time_s"].as_f64().map(f64::to_bits),
+        journaled.fall_time_s.map(f64::to_bits)
+    );
+    let header: serde_json::Value = serde_json::from_str(
+        std::fs::read_to_string(&record)
+            .unwrap()
+            .lines()
+            .next()
+            .unwrap(),
+    )
+    .unwrap();
+    assert_eq!(
+        header["seed"], v["seed"],
+        "the replay records the farm trial's seed"
+    );
+    let err = String::from_utf8_lossy(
+        &naofarm()
+            .args(["trial", "--iteration", "99", "--trial", "0", "--run"])
+            .arg(&run_dir)
+            .output()
+            .unwrap()
+            .stderr,
+    )
+    .to_string();
+    assert!(err.contains("iteration 99 is not open"), "{err}");
+}
+
+#[test]
+fn a_closed_pipe_ends_output_quietly() {
+    // `naofarm model | head -1`, and a run whose JSON events (over 100 kB,
+    // more than a pipe holds) lose their reader after one line: each ends
+    // with 0 and no panic, and the run goes on to its end.
+    let dir = scratch("pipe");
+    let run_dir = dir.join("run").display().to_string();
+    let exp = root()
+        .join("experiments/synthetic.toml")
+        .display()
+        .to_string();
+    for args in [
+        vec!["model".to_string()],
+        vec!["model".into(), "--json".into()],
+        vec![
+            "run".into(),
+            "--json".into(),
+            exp,
+            "--out".into(),
+            run_dir.clone(),
+        ],
+    ] {
+        use std::io::BufRead;
+        let mut child = naofarm()
+            .args(&args)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut first = String::new();
+        std::io::BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut first)
+            .unwrap();
+        assert!(!first.is_empty());
+        let out = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(0), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+    let h = succeed(naofarm().args(["history", "--csv", &run_dir]));
+    assert_eq!(
+        String::from_utf8_lossy(&h.stdout).lines().count(),
+        61,
+        "the run went on"
+    );
+}
+
+#[test]
+fn model_prints_the_robot_and_refuses_an_impossible_thigh() {
+    let out = naofarm()
+        .args(["model", "--json", "--param", "ThighRelHip2_Z=-0.079"])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!((v["total_mass_kg"].as_f64().unwrap() - 4.6071).abs() < 1e-9);
+    assert!((v["hip_to_sole_m"].as_f64().unwrap() - 0.309).abs() < 1e-9);
+    let joints = v["joints"].as_array().unwrap();
+    assert_eq!(joints.len(), 22);
+    for f in ["name", "lower_rad", "upper_rad", "max_speed_rad_s"] {
+        assert!(joints.iter().all(|j| !j[f].is_null()), "{f}");
+    }
+    let out = naofarm()
+        .args(["model", "--param", "ThighRelHip2_Z=0.2"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("ThighRelHip2_Z") && err.contains("[-0.12, -0.005]"),
+        "{err}"
+    );
+    let out = naofarm()
+        .args(["model", "--param", "Bogus=1"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let out = naofarm().args(["model", "--type", "7"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
+fn stand_holds_and_reports_its_fields() {
+    let out = succeed(naofarm().args(["stand", "--json", "--seconds", "3"]));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["fell"], false);
+    let lo = v["torso_height_min_m"].as_f64().unwrap();
+    let hi = v["torso_height_max_m"].as_f64().unwrap();
+    assert!(lo > 0.3 && hi - lo < 0.01, "{lo} {hi}");
+    let out = naofarm()
+        .args(["stand", "--param", "ThighRelHip2_Z=-0.3"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
+fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
+    let run = |seed: &str| {
+        let out = succeed(naofarm().args([
+            "trial",
+            "--json",
+            "--trials",
+            "3",
+            "--duration",
+            "3",
+            "--seed",
+            seed,
+        ]));
+        serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()
+    };
+    let a = run("5");
+    for f in ["s", "mx", "my", "ex", "ey"] {
+        assert!(a[f].is_number(), "{f}: {a}");
+    }
+    let trials = a["trials"].as_array().unwrap();
+    assert_eq!(trials.len(), 3);
+    for f in ["seed", "fell", "x", "y", "fall_time_s"] {
+        assert!(trials.iter().all(|t| t.get(f).is_some()), "{f}");
+    }
+    let b = run("5");
+    assert_eq!(a["mx"], b["mx"]);
+    assert_eq!(a["trials"], b["trials"]);
+    for bad in ["ratio_flexion=7", "Bogus=1", "height_lift=nan"] {
+        let out = naofarm()
+            .args(["trial", "--trials", "1", "--param", bad])
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(2), "{bad}");
+        assert!(!out.stderr.is_empty());
+    }
+    let out = naofarm()
+        .args(["trial", "--trials", "1", "--pgs-iterations", "500"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--pgs-iterations"));
+}
+
+#[test]
+fn trial_records_a_replay_of_its_first_trial() {
+    let f = scratch("record").join("replay.jsonl");
+    let out = succeed(
+        naofarm()
+            .args([
+                "trial",
+                "--json",
+                "--trials",
+                "2",
+                "--duration",
+                "1",
+                "--seed",
+                "4",
+            ])
+            .arg("--record")
+            .arg(&f),
+    );
+    let row: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let text = std::fs::read_to_string(&f).unwrap();
+    let lines: Vec<serde_json::Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let bodies = lines[0]["bodies"].as_array().unwrap().len();
+    assert_eq!(lines[0]["seed"], 4);
+    assert_eq!(bodies, 23, "type 0 has 23 bodies");
+    // One line per 20 ms cycle of the 1 s trial, every body's pose in each.
+    assert_eq!(lines.len(), 1 + 50);
+    for l in &lines[1..] {
+        let poses = l["poses"].as_array().unwrap();
+        assert_eq!(poses.len(), bodies);
+        assert!(poses
+            .iter()
+            .flat_map(|p| p.as_array().unwrap())
+            .all(|x| x.as_f64().unwrap().is_finite()));
+    }
+    // The recorded trial is the first of the row: same end of the torso.
+    let last = &lines[50]["poses"][0];
+    let first = &lines[1]["poses"][0];
+    let dx = last[0].as_f64().unwrap() - first[0].as_f64().unwrap();
+    let x = row["trials"][0]["x"].as_f64().unwrap();
+    assert!((dx - x).abs() < 0.05, "{dx} vs {x}");
+    let z = last[2].as_f64().unwrap();
+    assert!(z > 0.25 && z < 0.45, "torso at {z} m");
+    let out = naofarm()
+        .args([
+            "trial",
+            "--trials",
+            "1",
+            "--record",
+            "/nonexistent-dir/x.jsonl",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
+fn the_nao_farm_gives_the_same_history_with_one_or_two_workers() {
+    let dir = scratch("nao-farm");
+    let exp = dir.join("nao.toml");
+    std::fs::write(
+        &exp,
+        "name = \"nao-small\"\nseed = 3\niterations = 3\ntrials_per_iteration = 3\n\
+         trial_duration_s = 2.0\npipeline_depth = 2\nmodel = \"nao\"\nstart = \"expert\"\n\n\
+         [[parameter]]\nname = \"ratio_flexion\"\nkind = \"linear\"\nlower = 0.6\nupper = 0.95\nexpert = 0.73\n\n\
+         [[parameter]]\nname = \"xlength_step_max\"\nkind = \"linear\"\nlower = 0.02\nupper = 0.15\nexpert = 0.08\n",
+    )
+    .unwrap();
+    let run = |workers: &str| {
+        let out_dir = dir.join(format!("run-{workers}"));
+        let out = succeed(
+            naofarm()
+                .args(["run", "--json", "--workers", workers])
+                .arg(&exp)
+                .arg("--out")
+                .arg(&out_dir),
+        );
+        events(&out.stdout)
+            .decided
+            .into_iter()
+            .map(|v| {
+                (
+                    v["iteration"].clone(),
+                    v["decision"].clone(),
+                    v["stats"]["mx"].clone(),
+                    v["params"].clone(),
+                )
+            })
+            .collect::<Vec<_>>()
+    };
+    let one = run("1");
+    assert_eq!(one.len(), 3);
+    assert_eq!(one, run("2"));
+}
+
+#[test]
+fn deploy_configs_are_valid_zenoh_configs() {
+    for f in ["router", "coordinator", "worker"] {
+        let path = root().join(format!("deploy/{f}.json5"));
+        if let Err(e) = zenoh::Config::from_file(&path) {
+            panic!("{}: {e}", path.display());
+        }
+    }
+}

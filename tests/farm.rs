@@ -1,0 +1,953 @@
+//! The farm as real processes over 127.0.0.1: a coordinator, workers, kills,
+//! watchers, the topics' documented fields.
+#![allow(clippy::unwrap_used)]
+
+mod util;
+
+use std::{
+    io::{BufRead, BufReader},
+    path::{Path, PathBuf},
+    process::{Child, Stdio},
+    sync::mpsc,
+    time::{Duration, Instant},
+};
+
+use coordinator::{
+    evolve::DecidedIteration,
+    journal::{Journal, Record},
+};
+
+use util::{events, naofarm, root, scratch, succeed, Proc};
+
+const TIMEOUT: Duration = Duration::from_secs(120);
+
+fn experiment(dir: &Path, iterations: u64) -> PathBuf {
+    let text = std::fs::read_to_string(root().join("experiments/test/two-parameters.toml"))
+        .unwrap()
+        .replace("name = \"syn\"", "name = \"farm\"")
+        .replace("seed = 42", "seed = 5")
+        .replace("iterations = 40", &format!("iterations = {iterations}"))
+        .replace("n_mcmc = 200", "n_mcmc = 100");
+    let p = dir.join("exp.toml");
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+struct Coordinator {
+    child: Child,
+    stderr: PathBuf,
+    lines: mpsc::Receiver<String>,
+    seen: Vec<String>,
+}
+
+impl Coordinator {
+    fn start(exp: &Path, out: &Path, port: u16, lease_s: f64) -> Self {
+        let stderr = out.with_extension("stderr");
+        let mut child = naofarm()
+            .args(["coordinator", "--json", "--lease-s", &lease_s.to_string()])
+            .arg(exp)
+            .arg("--out")
+            .arg(out)
+            .args(["--listen", &format!("tcp/127.0.0.1:{port}")])
+            .env("RUST_LOG", "warn,naofarm_coordinator::service=info")
+            .stdout(Stdio::piped())
+            .stderr(std::fs::File::create(&stderr).unwrap())
+            .spawn()
+            .unwrap();
+        let stdout = child.stdout.take().unwrap();
+        let (tx, lines) = mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        Self {
+            child,
+            stderr,
+            lines,
+            seen: Vec::new(),
+        }
+    }
+
+    /// Waits until `n` iterations have been decided (by its JSON lines).
+    fn wait_decided(&mut self, n: usize) {
+        let deadline = Instant::now() + TIMEOUT;
+        let decided = |seen: &[String]| {
+            seen.iter()
+                .filter(|l| l.starts_with("{\"event\":\"decided\""))
+                .count()
+        };
+        while decided(&self.seen) < n {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.lines.recv_timeout(left) {
+                Ok(l) => self.seen.push(l),
+                Err(e) => panic!("waiting for {n} decisions: {e}; saw {:?}", self.seen),
+            }
+        }
+    }
+
+    /// Its final counters (the `finished` JSON line), once it has exited.
+    fn finished(&self) -> serde_json::Value {
+        self.seen
+            .iter()
+            .find(|l| l.contains("\"event\":\"finished\""))
+            .map(|l| serde_json::from_str(l).unwrap())
+            .unwrap_or_else(|| panic!("no finished line in {:?}", self.seen))
+    }
+
+    /// Waits until its log (info level for the service) says `needle`.
+    fn wait_log(&self, needle: &str) {
+        let deadline = Instant::now() + TIMEOUT;
+        while !plain(&std::fs::read_to_string(&self.stderr).unwrap_or_default()).contains(needle) {
+            assert!(
+                Instant::now() < deadline,
+                "the coordinator never logged `{needle}`"
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
+    fn wait_exit(&mut self) -> std::process::ExitStatus {
+        let deadline = Instant::now() + TIMEOUT;
+        loop {
+            if let Some(s) = self.child.try_wait().unwrap() {
+                while let Ok(l) = self.lines.recv_timeout(Duration::from_millis(200)) {
+                    self.seen.push(l);
+                }
+                return s;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "coordinator did not finish; saw {:?}",
+                self.seen
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+impl Drop for Coordinator {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        if std::thread::panicking() {
+            eprintln!(
+                "--- coordinator stderr ---\n{}",
+                std::fs::read_to_string(&self.stderr).unwrap_or_default()
+            );
+        }
+    }
+}
+
+fn worker(port: u16, slots: u32, pace_ms: u64) -> Proc {
+    Proc::spawn(
+        naofarm()
+            .args(["worker", "--connect", &format!("tcp/127.0.0.1:{port}")])
+            .args([
+                "--slots",
+                &slots.to_string(),
+                "--min-trial-ms",
+                &pace_ms.to_string(),
+            ])
+            .env("RUST_LOG", "warn,naofarm_worker::service=info")
+            .stdout(Stdio::null()),
+        &std::env::temp_dir(),
+        "worker",
+    )
+}
+
+/// Log text without the terminal colours tracing may add.
+fn plain(log: &str) -> String {
+    let mut text = String::new();
+    let mut in_escape = false;
+    for ch in log.chars() {
+        match (in_escape, ch) {
+            (false, '\u{1b}') => in_escape = true,
+            (true, 'm') => in_escape = false,
+            (true, _) => {}
+            (false, c) => text.push(c),
+        }
+    }
+    text
+}
+
+/// The id of a worker (from its "worker ready" log line), waiting for it.
+fn worker_id(p: &Proc) -> String {
+    let deadline = Instant::now() + TIMEOUT;
+    loop {
+        let text = plain(&p.stderr());
+        if let Some(id) = text
+            .lines()
+            .find(|l| l.contains("worker ready"))
+            .and_then(|l| l.split("worker=").nth(1))
+            .and_then(|r| r.split_whitespace().next())
+        {
+            return id.to_string();
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the worker never got ready: {text}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// The index of a worker of `ws` that the run in `out` has journaled an
+/// outcome of (so it is connected and being given work), waiting for one.
+fn a_busy_worker(out: &Path, ws: &[Proc]) -> usize {
+    let ids: Vec<String> = ws.iter().map(worker_id).collect();
+    let deadline = Instant::now() + TIMEOUT;
+    loop {
+        let records = Journal::read(out).map(|s| s.records()).unwrap_or_default();
+        if let Some(i) = ids.iter().position(|id| {
+            records
+                .iter()
+                .any(|r| matches!(r, Record::Outcome { worker, .. } if worker == id))
+        }) {
+            return i;
+        }
+        assert!(Instant::now() < deadline, "no worker ran a trial");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn journal(dir: &Path) -> Vec<Record> {
+    Journal::read(dir).unwrap().records()
+}
+
+fn decided(records: &[Record]) -> Vec<DecidedIteration> {
+    records
+        .iter()
+        .filter_map(|r| {
+            if let Record::Decided(d) = r {
+                Some(d.clone())
+            } else {
+                None
+            }
+        })
+        .collect()
+}
+
+fn bits(h: &[DecidedIteration]) -> Vec<u64> {
+    let mut v = Vec::new();
+    for d in h {
+        v.push(d.iteration);
+        v.extend(d.params.iter().map(|x| x.to_bits()));
+        v.push(d.decision as u64);
+        v.extend(
+            [d.stats.mx, d.stats.my, d.stats.ex]
+                .iter()
+                .map(|x| x.map_or(u64::MAX, f64::to_bits)),
+        );
+    }
+    v
+}
+
+fn assert_every_trial_once(records: &[Record], iterations: u64) {
+    let mut seen = std::collections::BTreeSet::new();
+    for r in records {
+        if let Record::Outcome {
+            iteration, trial, ..
+        } = r
+        {
+            assert!(
+                seen.insert((*iteration, *trial)),
+                "trial {iteration}/{trial} journaled twice"
+            );
+        }
+    }
+    assert_eq!(seen.len() as u64, iterations * 6, "every trial journaled");
+}
+
+fn kill_all(children: &mut [Proc]) {
+    for c in children.iter_mut() {
+        c.kill();
+    }
+}
+
+fn signal(child: &Child, sig: &str) {
+    let ok = std::process::Command::new("kill")
+        .args([sig, &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(ok.success());
+}
+
+/// Runs a whole farm run with `n` workers; returns the run directory.
+fn farm_run(name: &str, n: usize, iterations: u64) -> PathBuf {
+    let dir = scratch(name);
+    let exp = experiment(&dir, iterations);
+    let port = free_port();
+    let out = dir.join("run");
+    // Workers first: they keep trying to connect until the coordinator listens.
+    let mut ws: Vec<Proc> = (0..n).map(|_| worker(port, 2, 15)).collect();
+    let mut c = Coordinator::start(&exp, &out, port, 30.0);
+    let status = c.wait_exit();
+    kill_all(&mut ws);
+    assert!(status.success(), "coordinator: {status}; {:?}", c.seen);
+    out
+}
+
+#[test]
+fn three_workers_complete_a_run_with_every_trial_journaled_once() {
+    let out = farm_run("three", 3, 20);
+    let records = journal(&out);
+    assert_every_trial_once(&records, 20);
+    let workers: std::collections::BTreeSet<String> =
+        records.iter().filter_map(outcome_worker).collect();
+    assert!(
+        workers.len() >= 2,
+        "trials spread over workers: {workers:?}"
+    );
+}
+
+#[test]
+fn one_worker_and_three_workers_give_bit_identical_histories() {
+    let one = decided(&journal(&farm_run("det1", 1, 15)));
+    let three = decided(&journal(&farm_run("det3", 3, 15)));
+    assert_eq!(one.len(), 15);
+    assert_eq!(bits(&one), bits(&three));
+}
+
+#[test]
+fn a_killed_worker_loses_no_trial() {
+    let dir = scratch("sigkill");
+    let exp = experiment(&dir, 20);
+    let port = free_port();
+    let out = dir.join("run");
+    let mut c = Coordinator::start(&exp, &out, port, 30.0);
+    let mut ws: Vec<Proc> = (0..3).map(|_| worker(port, 2, 20)).collect();
+    c.wait_decided(3);
+    let victim = a_busy_worker(&out, &ws);
+    ws[victim].kill();
+    let status = c.wait_exit();
+    kill_all(&mut ws);
+    assert!(status.success(), "{:?}", c.seen);
+    let records = journal(&out);
+    assert_every_trial_once(&records, 20);
+    // Every worker is kept busy, so the killed one held trials: the
+    // coordinator journaled their loss and gave them to others.
+    let finished = c.finished();
+    assert!(finished["redispatched"].as_u64() >= Some(1), "{finished}");
+    let lost: Vec<&Record> = records
+        .iter()
+        .filter(|r| matches!(r, Record::Failed { reason, .. } if reason.contains("went away")))
+        .collect();
+    assert!(
+        !lost.is_empty(),
+        "the killed worker's trials are journaled as lost"
+    );
+    for r in lost {
+        let Record::Failed {
+            iteration,
+            trial,
+            worker,
+            ..
+        } = r
+        else {
+            unreachable!()
+        };
+        let ran = records.iter().find_map(|o| match o {
+            Record::Outcome {
+                iteration: i,
+                trial: k,
+                worker: w,
+                ..
+            } if i == iteration && k == trial => Some(w.clone()),
+            _ => None,
+        });
+        assert!(
+            ran.is_some_and(|w| &w != worker),
+            "trial {iteration}/{trial} re-dispatched to another worker"
+        );
+    }
+}
+
+#[test]
+fn a_frozen_worker_is_replaced_and_its_late_outcomes_ignored() {
+    let dir = scratch("sigstop");
+    let exp = experiment(&dir, 24);
+    let port = free_port();
+    let out = dir.join("run");
+    let mut c = Coordinator::start(&exp, &out, port, 1.0);
+    let mut ws: Vec<Proc> = (0..3).map(|_| worker(port, 2, 20)).collect();
+    c.wait_decided(2);
+    let frozen = a_busy_worker(&out, &ws);
+    signal(&ws[frozen].child, "-STOP");
+    // Frozen past its trials' 1 s lease but not its 3 s transport lease:
+    // the trials go elsewhere, and the frozen worker's answers still arrive.
+    c.wait_log("lease expired");
+    signal(&ws[frozen].child, "-CONT");
+    let status = c.wait_exit();
+    kill_all(&mut ws);
+    assert!(status.success(), "{:?}", c.seen);
+    assert_every_trial_once(&journal(&out), 24);
+    // The frozen worker's trials went to others when their lease passed;
+    // its late outcomes, sent on SIGCONT, were counted once: as duplicates
+    // (or refused, when their iteration was already decided), never journaled.
+    let f = c.finished();
+    assert_eq!(f["accepted"], 24 * 6, "{f}");
+    assert!(f["redispatched"].as_u64() >= Some(1), "{f}");
+    let late = f["duplicates"].as_u64().unwrap_or(0) + f["refused"].as_u64().unwrap_or(0);
+    assert!(
+        late >= 1,
+        "the late outcomes arrived and were not journaled: {f}"
+    );
+}
+
+#[test]
+fn a_killed_coordinator_resumes_to_the_same_history() {
+    let reference = decided(&journal(&farm_run("resume-ref", 2, 20)));
+    let dir = scratch("resume");
+    let exp = experiment(&dir, 20);
+    let port = free_port();
+    let out = dir.join("run");
+    let mut ws: Vec<Proc> = (0..2).map(|_| worker(port, 2, 10)).collect();
+    // SIGKILL at several points: after 3 new decisions, 6 more, 5 more.
+    for n in [3, 6, 5] {
+        let mut c = Coordinator::start(&exp, &out, port, 30.0);
+        c.wait_decided(n);
+        c.child.kill().unwrap();
+        let _ = c.child.wait();
+    }
+    let mut c = Coordinator::start(&exp, &out, port, 30.0);
+    let status = c.wait_exit();
+    kill_all(&mut ws);
+    assert!(status.success(), "{:?}", c.seen);
+    let records = journal(&out);
+    assert_every_trial_once(&records, 20);
+    assert_eq!(bits(&decided(&records)), bits(&reference));
+}
+
+#[test]
+fn a_worker_that_fails_every_trial_is_set_aside_and_the_history_is_the_runs() {
+    let dir = scratch("set-aside");
+    let exp = experiment(&dir, 20);
+    let local = dir.join("local");
+    succeed(
+        naofarm()
+            .args(["run", "--json", "--workers", "2"])
+            .arg(&exp)
+            .arg("--out")
+            .arg(&local),
+    );
+    let port = free_port();
+    let out = dir.join("run");
+    let mut bad = Proc::spawn(
+        naofarm()
+            .args(["worker", "--connect", &format!("tcp/127.0.0.1:{port}")])
+            .args(["--slots", "2", "--min-trial-ms", "5"])
+            .env("NAOFARM_FAULT_TRIAL", "fail")
+            .stdout(Stdio::null()),
+        &dir,
+        "failing-worker",
+    );
+    // All workers first (they retry until the coordinator listens); the bad
+    // one has the most free slots, so it is offered work first.
+    let mut ws = vec![worker(port, 1, 20), worker(port, 1, 20)];
+    let mut c = Coordinator::start(&exp, &out, port, 30.0);
+    let status = c.wait_exit();
+    kill_all(&mut ws);
+    bad.kill();
+    assert!(status.success(), "{:?}", c.seen);
+    let finished: serde_json::Value = c
+        .seen
+        .iter()
+        .find(|l| l.starts_with("{\"accepted\"") || l.contains("\"event\":\"finished\""))
+        .map(|l| serde_json::from_str(l).unwrap())
+        .expect("a finished line");
+    let set_aside = finished["set_aside"].as_array().expect("set_aside");
+    assert_eq!(set_aside.len(), 1, "{finished}");
+    assert!(finished["failures"].as_u64().unwrap() >= 3, "{finished}");
+    let records = journal(&out);
+    assert_every_trial_once(&records, 20);
+    let failed: Vec<&Record> = records
+        .iter()
+        .filter(|r| matches!(r, Record::Failed { worker, .. } if serde_json::json!(worker) == set_aside[0]))
+        .collect();
+    assert!(
+        failed.len() >= 3,
+        "the failures are journaled with their worker"
+    );
+    assert_eq!(
+        bits(&decided(&records)),
+        bits(&decided(&journal(&local))),
+        "the same history as the run alone"
+    );
+}
+
+#[test]
+fn a_second_coordinator_on_a_run_directory_exits_2_while_the_first_finishes() {
+    let dir = scratch("two-coordinators");
+    let exp = experiment(&dir, 8);
+    let port = free_port();
+    let out = dir.join("run");
+    let mut c = Coordinator::start(&exp, &out, port, 30.0);
+    // No worker yet: the first coordinator holds the run and waits for one.
+    let deadline = Instant::now() + TIMEOUT;
+    let holder = format!("pid {}", c.child.id());
+    while !std::fs::read_to_string(out.join("lock")).is_ok_and(|t| t.contains(&holder)) {
+        assert!(
+            Instant::now() < deadline,
+            "the first coordinator never took the lock"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let second = naofarm()
+        .args(["coordinator", "--json"])
+        .arg(&exp)
+        .arg("--out")
+        .arg(&out)
+        .args(["--listen", &format!("tcp/127.0.0.1:{}", free_port())])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&second.stderr);
+    assert_eq!(second.status.code(), Some(2), "{err}");
+    assert!(err.contains(&holder) && err.contains("in use"), "{err}");
+    let mut ws = vec![worker(port, 2, 5)];
+    let status = c.wait_exit();
+    kill_all(&mut ws);
+    assert!(status.success(), "{:?}", c.seen);
+    assert_every_trial_once(&journal(&out), 8);
+}
+
+#[test]
+fn a_worker_that_joins_mid_run_gets_work() {
+    let dir = scratch("join");
+    let exp = experiment(&dir, 16);
+    let port = free_port();
+    let out = dir.join("run");
+    let mut c = Coordinator::start(&exp, &out, port, 30.0);
+    let mut ws = vec![worker(port, 1, 25)];
+    c.wait_decided(3);
+    // Read only: the coordinator holds the run and may be writing its tail.
+    let before = Journal::read(&out).unwrap().records.len();
+    ws.push(worker(port, 1, 25));
+    let status = c.wait_exit();
+    kill_all(&mut ws);
+    assert!(status.success(), "{:?}", c.seen);
+    let records = journal(&out);
+    assert_every_trial_once(&records, 16);
+    let early: std::collections::BTreeSet<String> = records[..before]
+        .iter()
+        .filter_map(outcome_worker)
+        .collect();
+    let late: std::collections::BTreeSet<String> = records[before..]
+        .iter()
+        .filter_map(outcome_worker)
+        .collect();
+    assert_eq!(early.len(), 1, "one worker before the join: {early:?}");
+    assert!(
+        late.difference(&early).count() == 1,
+        "the joiner ran trials after it joined: before {early:?}, after {late:?}"
+    );
+}
+
+fn outcome_worker(r: &Record) -> Option<String> {
+    if let Record::Outcome { worker, .. } = r {
+        Some(worker.clone())
+    } else {
+        None
+    }
+}
+
+/// The README's field tables: schema name → (field, type) rows.
+fn readme_schemas() -> std::collections::BTreeMap<String, Vec<(String, String)>> {
+    let text = std::fs::read_to_string(root().join("README.md")).unwrap();
+    let mut out = std::collections::BTreeMap::new();
+    let mut current: Option<(String, Vec<(String, String)>)> = None;
+    for line in text.lines() {
+        if let Some(name) = line
+            .strip_prefix("<!-- schema:")
+            .and_then(|l| l.strip_suffix(" -->"))
+        {
+            current = Some((name.to_string(), Vec::new()));
+        } else if line == "<!-- /schema -->" {
+            let (name, rows) = current.take().expect("a /schema without a schema");
+            out.insert(name, rows);
+        } else if let Some((_, rows)) = current.as_mut() {
+            let cells: Vec<&str> = line.split('|').map(str::trim).collect();
+            if cells.len() >= 4 && cells[1].starts_with('`') {
+                rows.push((cells[1].trim_matches('`').to_string(), cells[2].to_string()));
+            }
+        }
+    }
+    assert!(current.is_none(), "an unclosed schema table");
+    out
+}
+
+/// Checks `v` against schema `name`: every documented field with its
+/// type, and no field the README does not document.
+fn conforms(
+    schemas: &std::collections::BTreeMap<String, Vec<(String, String)>>,
+    name: &str,
+    v: &serde_json::Value,
+) -> Result<(), String> {
+    let rows = schemas
+        .get(name)
+        .ok_or_else(|| format!("no schema {name} in the README"))?;
+    let obj = v
+        .as_object()
+        .ok_or_else(|| format!("{name}: not an object: {v}"))?;
+    for key in obj.keys() {
+        if !rows.iter().any(|(f, _)| f == key) {
+            return Err(format!("{name}.{key} is not documented in the README"));
+        }
+    }
+    for (field, ty) in rows {
+        let value = obj
+            .get(field)
+            .ok_or_else(|| format!("{name}.{field} is documented but missing"))?;
+        let (ty, nullable) = match ty.strip_suffix(" or null") {
+            Some(t) => (t, true),
+            None => (ty.as_str(), false),
+        };
+        if value.is_null() && nullable {
+            continue;
+        }
+        let ok = match ty {
+            "string" => value.is_string(),
+            "integer" => value.is_u64(),
+            "number" => value.is_number(),
+            "boolean" => value.is_boolean(),
+            "pairs" => value.as_array().is_some_and(|a| {
+                a.iter().all(|p| {
+                    p.as_array()
+                        .is_some_and(|p| p.len() == 2 && p[0].is_string() && p[1].is_number())
+                })
+            }),
+            other => {
+                conforms(schemas, other, value)?;
+                true
+            }
+        };
+        if !ok {
+            return Err(format!("{name}.{field} should be {ty}: {value}"));
+        }
+    }
+    Ok(())
+}
+
+fn session_to(port: u16) -> zenoh::Session {
+    use zenoh::Wait;
+    let mut cfg = zenoh::Config::default();
+    cfg.insert_json5("scouting/multicast/enabled", "false")
+        .unwrap();
+    cfg.insert_json5("listen/endpoints", "[]").unwrap();
+    cfg.insert_json5("connect/endpoints", &format!("[\"tcp/127.0.0.1:{port}\"]"))
+        .unwrap();
+    zenoh::open(cfg).wait().unwrap()
+}
+
+#[test]
+fn every_topic_matches_the_readme_field_tables() {
+    use zenoh::Wait;
+    let schemas = readme_schemas();
+    for s in [
+        "Params",
+        "TrialOutcome",
+        "IterationResult",
+        "RunStatus",
+        "Stats",
+        "Best",
+    ] {
+        assert!(schemas.contains_key(s), "README lacks the {s} table");
+    }
+    let dir = scratch("schema");
+    let exp = experiment(&dir, 8);
+    let port = free_port();
+    let out = dir.join("run");
+    let mut c = Coordinator::start(&exp, &out, port, 30.0);
+    let session = session_to(port);
+    let (tx, rx) = mpsc::channel();
+    let _sub = session
+        .declare_subscriber("naofarm/farm/**")
+        .callback(move |s| {
+            let _ = tx.send((
+                s.key_expr().as_str().to_string(),
+                s.encoding().clone(),
+                String::from_utf8_lossy(&s.payload().to_bytes()).into_owned(),
+            ));
+        })
+        .wait()
+        .unwrap();
+    // The coordinator answers its status query once the session is up;
+    // only then start the worker, so that no message is published unseen.
+    let ask_deadline = Instant::now() + TIMEOUT;
+    let ask = |key: String| loop {
+        assert!(Instant::now() < ask_deadline, "no answer to {key}");
+        let replies = session
+            .get(key.as_str())
+            .timeout(Duration::from_secs(2))
+            .wait()
+            .unwrap();
+        if let Ok(r) = replies.recv() {
+            let s = r.result().unwrap();
+            assert_eq!(s.encoding(), &zenoh::bytes::Encoding::APPLICATION_JSON);
+            let text = String::from_utf8_lossy(&s.payload().to_bytes()).into_owned();
+            break serde_json::from_str::<serde_json::Value>(&text).unwrap();
+        }
+    };
+    let status = ask(protocol::keys::status("naofarm", "farm"));
+    conforms(&schemas, "RunStatus", &status).unwrap();
+    let mut ws = vec![worker(port, 2, 5)];
+    c.wait_decided(4);
+    let history = ask(protocol::keys::history("naofarm", "farm"));
+    let rows = history.as_array().expect("the history is an array");
+    assert!(rows.len() >= 4);
+    for r in rows {
+        conforms(&schemas, "IterationResult", r).unwrap();
+    }
+    let status = c.wait_exit();
+    kill_all(&mut ws);
+    assert!(status.success());
+    let mut kinds = std::collections::BTreeMap::new();
+    // The coordinator's last message is a finished status; one session's
+    // messages arrive in order, so everything before it has arrived then.
+    let deadline = Instant::now() + TIMEOUT;
+    let mut finished = false;
+    let next = |finished: bool| {
+        if finished {
+            return rx.try_recv().ok();
+        }
+        let left = deadline.saturating_duration_since(Instant::now());
+        Some(
+            rx.recv_timeout(left)
+                .expect("the finished status before the deadline"),
+        )
+    };
+    while let Some((key, encoding, text)) = next(finished) {
+        assert_eq!(encoding, zenoh::bytes::Encoding::APPLICATION_JSON, "{key}");
+        let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let schema = match key.split('/').nth(2) {
+            Some("params") => "Params",
+            Some("trials") => "TrialOutcome",
+            Some("results") => "IterationResult",
+            Some("status") => "RunStatus",
+            other => panic!("an unexpected topic {other:?}: {key}"),
+        };
+        conforms(&schemas, schema, &v).unwrap_or_else(|e| panic!("{key}: {e}"));
+        *kinds.entry(schema).or_insert(0) += 1;
+        finished |= schema == "RunStatus" && v["finished"] == true;
+    }
+    assert_eq!(kinds.get("TrialOutcome"), Some(&48), "{kinds:?}");
+    assert_eq!(kinds.get("IterationResult"), Some(&8), "{kinds:?}");
+    // The first D = 3 iterations open before this session subscribes.
+    assert!(kinds.get("Params").is_some_and(|&n| n >= 5), "{kinds:?}");
+    assert!(kinds.get("RunStatus").is_some_and(|&n| n >= 8), "{kinds:?}");
+    // A broken document fails the check (the check can fail).
+    let mut bad = history[0].clone();
+    bad["stats"]["undocumented"] = serde_json::json!(1);
+    assert!(conforms(&schemas, "IterationResult", &bad).is_err());
+}
+
+#[test]
+fn a_late_watcher_gets_the_history_then_every_later_iteration_once() {
+    let dir = scratch("watch");
+    let exp = experiment(&dir, 14);
+    let port = free_port();
+    let out = dir.join("run");
+    let mut c = Coordinator::start(&exp, &out, port, 30.0);
+    let mut ws = vec![worker(port, 2, 40)];
+    c.wait_decided(4);
+    let watcher = naofarm()
+        .args(["watch", "farm", "--json", "--connect"])
+        .arg(format!("tcp/127.0.0.1:{port}"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let status = c.wait_exit();
+    kill_all(&mut ws);
+    assert!(status.success());
+    let w = watcher.wait_with_output().unwrap();
+    assert!(
+        w.status.success(),
+        "watch: {}",
+        String::from_utf8_lossy(&w.stderr)
+    );
+    let ev = events(&w.stdout);
+    assert!(ev.history.len() >= 4, "the status query's history");
+    assert!(!ev.decided.is_empty(), "followed live");
+    let mut seen: Vec<u64> = ev
+        .history
+        .iter()
+        .chain(&ev.decided)
+        .map(|r| r["iteration"].as_u64().unwrap())
+        .collect();
+    let reported = seen.len();
+    seen.sort_unstable();
+    seen.dedup();
+    assert_eq!(reported, seen.len(), "an iteration reported twice");
+    assert_eq!(seen, (0..14).collect::<Vec<u64>>(), "every iteration");
+    let journaled = decided(&journal(&out));
+    for r in ev.history.iter().chain(&ev.decided) {
+        let i = r["iteration"].as_u64().unwrap() as usize;
+        assert_eq!(r["stats"]["mx"].as_f64(), journaled[i].stats.mx);
+    }
+    let fin = ev.finished.expect("a finished line");
+    assert_eq!(fin["status"]["finished"], true);
+
+    // The run is over: watching it now says so and exits non-zero.
+    let after = naofarm()
+        .args(["watch", "farm", "--timeout-s", "1", "--connect"])
+        .arg(format!("tcp/127.0.0.1:{port}"))
+        .output()
+        .unwrap();
+    assert_eq!(after.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&after.stderr);
+    assert!(err.contains("finished or unknown"), "{err}");
+}
+
+#[test]
+fn watching_an_unknown_run_says_so() {
+    let dir = scratch("watch-unknown");
+    let exp = experiment(&dir, 3);
+    let port = free_port();
+    let out = dir.join("run");
+    let mut c = Coordinator::start(&exp, &out, port, 30.0);
+    let unknown = naofarm()
+        .args(["watch", "nosuchrun", "--timeout-s", "3", "--connect"])
+        .arg(format!("tcp/127.0.0.1:{port}"))
+        .output()
+        .unwrap();
+    let listed = naofarm()
+        .args(["watch", "--json", "--timeout-s", "5", "--connect"])
+        .arg(format!("tcp/127.0.0.1:{port}"))
+        .output()
+        .unwrap();
+    let mut ws = vec![worker(port, 2, 0)];
+    assert!(c.wait_exit().success());
+    kill_all(&mut ws);
+    assert_eq!(unknown.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&unknown.stderr);
+    assert!(
+        err.contains("nosuchrun") && err.contains("unknown"),
+        "{err}"
+    );
+    assert!(listed.status.success());
+    let runs: Vec<serde_json::Value> = String::from_utf8_lossy(&listed.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(runs.len(), 1, "{runs:?}");
+    assert_eq!(runs[0]["run"], "farm");
+    let bad = naofarm().args(["watch", "a/b"]).output().unwrap();
+    assert_eq!(bad.status.code(), Some(2));
+}
+
+#[test]
+fn bad_messages_are_counted_and_change_nothing() {
+    use protocol::wire::{TrialOutcome, WireMessage};
+    use zenoh::Wait;
+    let dir = scratch("garbage");
+    let exp = experiment(&dir, 10);
+    let port = free_port();
+    let out = dir.join("run");
+    // No worker yet: the coordinator cannot finish before the garbage is in.
+    let mut c = Coordinator::start(&exp, &out, port, 30.0);
+    let session = session_to(port);
+    // Wait until the coordinator is reachable (its status answers): by then
+    // its subscriptions are known to this session and puts are routed.
+    let deadline = Instant::now() + TIMEOUT;
+    loop {
+        let replies = session
+            .get(protocol::keys::status("naofarm", "farm"))
+            .timeout(Duration::from_secs(2))
+            .wait()
+            .unwrap();
+        if replies.recv().is_ok() {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "coordinator never answered its status query"
+        );
+    }
+    let key = protocol::keys::outcomes("naofarm");
+    let good = TrialOutcome {
+        run: "farm".into(),
+        iteration: 1,
+        trial: 0,
+        seed: 0,
+        dispatch: 0,
+        worker: "intruder".into(),
+        fell: false,
+        x_m: 1.0,
+        y_m: 0.0,
+        fall_time_s: None,
+        sim_time_s: 10.0,
+        wall_time_s: 0.0,
+    };
+    let mut nan = good.encode().unwrap();
+    // Same layout with x_m's bytes replaced by NaN: find 1.0f64 and swap it.
+    let one = 1.0f64.to_le_bytes();
+    if let Some(i) = nan.windows(8).position(|w| w == one) {
+        nan[i..i + 8].copy_from_slice(&f64::NAN.to_le_bytes());
+    }
+    let bad: Vec<Vec<u8>> = vec![
+        b"garbage".to_vec(),
+        vec![b'N', b'F', 99, 2, 1, 2, 3],
+        nan,
+        TrialOutcome {
+            run: "otherrun".into(),
+            ..good.clone()
+        }
+        .encode()
+        .unwrap(),
+        TrialOutcome {
+            iteration: 999_999,
+            ..good.clone()
+        }
+        .encode()
+        .unwrap(),
+        TrialOutcome {
+            trial: 77,
+            ..good.clone()
+        }
+        .encode()
+        .unwrap(),
+        TrialOutcome {
+            seed: 12345,
+            ..good.clone()
+        }
+        .encode()
+        .unwrap(),
+    ];
+    for b in &bad {
+        session.put(&key, b.clone()).wait().unwrap();
+    }
+    let mut ws: Vec<Proc> = (0..2).map(|_| worker(port, 2, 5)).collect();
+    let status = c.wait_exit();
+    kill_all(&mut ws);
+    session.close().wait().unwrap();
+    assert!(status.success(), "{:?}", c.seen);
+    let records = journal(&out);
+    assert_every_trial_once(&records, 10);
+    let intruder = records
+        .iter()
+        .any(|r| matches!(r, Record::Outcome { worker, .. } if worker == "intruder"));
+    assert!(
+        !intruder,
+        "nothing from the bad messages reached the journal"
+    );
+    let log = std::fs::read_to_string(out.with_extension("stderr")).unwrap();
+    let refused: u64 = log
+        .lines()
+        .find(|l| l.starts_with("run complete:"))
+        .and_then(|l| l.split(" refused").next())
+        .and_then(|s| s.rsplit(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no summary in {log}"));
+    assert!(refused >= bad.len() as u64, "{log}");
+}
