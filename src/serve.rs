@@ -165,6 +165,7 @@ pub fn summary(
                     "redispatched": c.redispatched,
                     "failures": c.failures,
                     "set_aside": c.set_aside,
+                    "refused_reasons": c.refused_reasons,
                     "cpu_s": service::process_cpu_seconds(),
                 }),
             ),

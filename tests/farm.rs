@@ -150,20 +150,25 @@ impl Drop for Coordinator {
 }
 
 fn worker(port: u16, slots: u32, pace_ms: u64) -> Proc {
-    Proc::spawn(
-        naofarm()
-            .args(["worker", "--connect", &format!("tcp/127.0.0.1:{port}")])
-            .args([
-                "--slots",
-                &slots.to_string(),
-                "--min-trial-ms",
-                &pace_ms.to_string(),
-            ])
-            .env("RUST_LOG", "warn,naofarm_worker::service=info")
-            .stdout(Stdio::null()),
-        &std::env::temp_dir(),
-        "worker",
-    )
+    worker_with(port, slots, pace_ms, None)
+}
+
+/// A worker process, with a fault hook (`VAR`, `VALUE`) switched on when given.
+fn worker_with(port: u16, slots: u32, pace_ms: u64, fault: Option<(&str, &str)>) -> Proc {
+    let mut cmd = naofarm();
+    cmd.args(["worker", "--connect", &format!("tcp/127.0.0.1:{port}")])
+        .args([
+            "--slots",
+            &slots.to_string(),
+            "--min-trial-ms",
+            &pace_ms.to_string(),
+        ])
+        .env("RUST_LOG", "warn,naofarm_worker::service=info")
+        .stdout(Stdio::null());
+    if let Some((var, value)) = fault {
+        cmd.env(var, value);
+    }
+    Proc::spawn(&mut cmd, &std::env::temp_dir(), "worker")
 }
 
 /// Log text without the terminal colours tracing may add.
@@ -484,6 +489,82 @@ fn a_worker_that_fails_every_trial_is_set_aside_and_the_history_is_the_runs() {
         bits(&decided(&journal(&local))),
         "the same history as the run alone"
     );
+}
+
+#[test]
+fn forged_and_misaddressed_outcomes_are_never_journaled() {
+    let dir = scratch("tamper");
+    let exp = experiment(&dir, 12);
+    let local = dir.join("local");
+    succeed(
+        naofarm()
+            .args(["run", "--json", "--workers", "2"])
+            .arg(&exp)
+            .arg("--out")
+            .arg(&local),
+    );
+    let want = bits(&decided(&journal(&local)));
+    for (var, mode, reason) in [
+        ("NAOFARM_FAULT_TRIAL", "forge", None),
+        (
+            "NAOFARM_FAULT_OUTCOME",
+            "wrong-dispatch",
+            Some("wrong dispatch id"),
+        ),
+        (
+            "NAOFARM_FAULT_OUTCOME",
+            "other-run",
+            Some("outcome for another run"),
+        ),
+        (
+            "NAOFARM_FAULT_OUTCOME",
+            "unsent",
+            Some("trial not in flight"),
+        ),
+    ] {
+        let port = free_port();
+        let out = dir.join(mode);
+        // All workers first; the tampering one has the most free slots, so it
+        // is offered work first.
+        let mut bad = worker_with(port, 2, 5, Some((var, mode)));
+        let mut ws = vec![worker(port, 1, 20), worker(port, 1, 20)];
+        let mut c = Coordinator::start(&exp, &out, port, 1.0);
+        let status = c.wait_exit();
+        let bad_id = worker_id(&bad);
+        bad.kill();
+        kill_all(&mut ws);
+        assert!(status.success(), "{mode}: {:?}", c.seen);
+        let records = journal(&out);
+        assert_every_trial_once(&records, 12);
+        assert!(
+            !records
+                .iter()
+                .any(|r| matches!(r, Record::Outcome { worker, .. } if *worker == bad_id)),
+            "{mode}: nothing of the tampering worker is journaled"
+        );
+        assert_eq!(
+            bits(&decided(&records)),
+            want,
+            "{mode}: the run's history as alone"
+        );
+        let f = c.finished();
+        match reason {
+            Some(r) => assert!(
+                f["refused_reasons"][r].as_u64() >= Some(1),
+                "{mode}: counted as `{r}`: {f}"
+            ),
+            None => {
+                let implausible = records.iter().any(|r| {
+                    matches!(r, Record::Failed { worker, reason, .. }
+                        if *worker == bad_id && reason.contains("implausible"))
+                });
+                assert!(
+                    implausible,
+                    "{mode}: a forged result is a failure of the trial: {f}"
+                );
+            }
+        }
+    }
 }
 
 #[test]

@@ -6,9 +6,9 @@
 //! A trial is queued until a live worker with a free slot takes it; it is
 //! *in flight* on that worker until the worker answers, its lease passes
 //! ([`Scheduler::tick`]), or the worker goes (token dropped, or silent for
-//! four silence periods). Workers that failed a trial are avoided for it while
-//! another live worker exists, and for one silence period after it failed;
-//! workers set aside get no work. Must not: decide
+//! four silence periods). Workers that failed a trial, or let its lease pass,
+//! are avoided for it while another live worker exists, and for one silence
+//! period after it failed; workers set aside get no work. Must not: decide
 //! whether an outcome counts (the run does) or block.
 
 use std::{
@@ -31,7 +31,37 @@ struct WorkerInfo {
 #[derive(Debug, Clone)]
 struct Inflight {
     worker: String,
+    dispatch: u64,
     deadline: Instant,
+}
+
+/// Whether an answer is for the dispatch in flight.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Answer {
+    /// It answers the dispatch in flight on that worker.
+    Held,
+    /// No such worker is known (a stranger, or one already gone).
+    UnknownWorker,
+    /// The trial is not in flight (never sent, already answered, lease passed).
+    NotInFlight,
+    /// The trial is in flight on another worker.
+    OtherWorker,
+    /// The worker holds the trial, but under another dispatch id.
+    WrongDispatch,
+}
+
+impl Answer {
+    /// A short name, for counters and logs.
+    #[must_use]
+    pub fn reason(self) -> &'static str {
+        match self {
+            Self::Held => "held",
+            Self::UnknownWorker => "unknown worker",
+            Self::NotInFlight => "trial not in flight",
+            Self::OtherWorker => "trial held by another worker",
+            Self::WrongDispatch => "wrong dispatch id",
+        }
+    }
 }
 
 /// What passing time did.
@@ -55,6 +85,8 @@ pub struct Scheduler {
     set_aside: BTreeSet<String>,
     /// A failed trial is not offered again to a worker that failed it before this.
     hold: HashMap<TrialId, Instant>,
+    /// Workers a trial's lease passed on: avoided for it like those that failed it.
+    expired_on: HashMap<TrialId, BTreeSet<String>>,
 }
 
 impl Scheduler {
@@ -70,6 +102,7 @@ impl Scheduler {
             workers: BTreeMap::new(),
             set_aside: BTreeSet::new(),
             hold: HashMap::new(),
+            expired_on: HashMap::new(),
         }
     }
 
@@ -112,6 +145,7 @@ impl Scheduler {
     pub fn forget(&mut self, t: TrialId) {
         self.queue.remove(&t);
         self.hold.remove(&t);
+        self.expired_on.remove(&t);
         if let Some(f) = self.inflight.remove(&t) {
             if let Some(w) = self.workers.get_mut(&f.worker) {
                 w.assigned.remove(&t);
@@ -119,18 +153,24 @@ impl Scheduler {
         }
     }
 
-    /// `by` answered trial `t` (an outcome or a failure): whether `by` held it.
-    /// Either way `by` was heard from and no longer holds `t`.
-    pub fn answered(&mut self, t: TrialId, by: &str, now: Instant) -> bool {
-        if let Some(w) = self.workers.get_mut(by) {
-            w.assigned.remove(&t);
-            w.last_seen = now;
+    /// `by` answered trial `t` echoing `dispatch` (an outcome or a failure):
+    /// whether that answers the dispatch in flight, sent to `by`. Only then is
+    /// the trial out of flight; `by` was heard from either way.
+    pub fn answered(&mut self, t: TrialId, by: &str, dispatch: u64, now: Instant) -> Answer {
+        let Some(w) = self.workers.get_mut(by) else {
+            return Answer::UnknownWorker;
+        };
+        w.last_seen = now;
+        match self.inflight.get(&t) {
+            None => Answer::NotInFlight,
+            Some(f) if f.worker != by => Answer::OtherWorker,
+            Some(f) if f.dispatch != dispatch => Answer::WrongDispatch,
+            Some(_) => {
+                self.inflight.remove(&t);
+                w.assigned.remove(&t);
+                Answer::Held
+            }
         }
-        let held = self.inflight.get(&t).is_some_and(|f| f.worker == by);
-        if held {
-            self.inflight.remove(&t);
-        }
-        held
     }
 
     /// Trial `t` just failed on a worker: it is queued again, and offered to a
@@ -155,11 +195,12 @@ impl Scheduler {
             .map(|(t, f)| (*t, f.worker.clone()))
             .collect();
         expired.sort();
-        for (t, w) in &expired {
+        for (t, id) in &expired {
             self.inflight.remove(t);
-            if let Some(w) = self.workers.get_mut(w) {
+            if let Some(w) = self.workers.get_mut(id) {
                 w.assigned.remove(t);
             }
+            self.expired_on.entry(*t).or_default().insert(id.clone());
         }
         let silent = self
             .workers
@@ -175,14 +216,15 @@ impl Scheduler {
     }
 
     /// Hands queued trials to live workers with free slots, most free slots
-    /// first (ties: smallest id). A trial that failed on some workers
+    /// first (ties: smallest id), each under a new dispatch id from `new_id`. A trial that failed on some workers
     /// (`failed(t)`) waits for another live worker while one exists. Returns
     /// the (trial, worker) pairs to send; they are in flight until `now + lease`.
     pub fn dispatch(
         &mut self,
         now: Instant,
         failed: &dyn Fn(TrialId) -> BTreeSet<String>,
-    ) -> Vec<(TrialId, String)> {
+        new_id: &mut dyn FnMut() -> u64,
+    ) -> Vec<(TrialId, String, u64)> {
         let mut out = Vec::new();
         let queued: Vec<TrialId> = self.queue.iter().copied().collect();
         for t in queued {
@@ -192,7 +234,8 @@ impl Scheduler {
             if !self.workers.iter().any(|(id, w)| free(self, id, w)) {
                 break;
             }
-            let failed = failed(t);
+            let mut failed = failed(t);
+            failed.extend(self.expired_on.get(&t).into_iter().flatten().cloned());
             let fresh_exists = self
                 .workers
                 .iter()
@@ -215,14 +258,16 @@ impl Scheduler {
             if let Some(w) = self.workers.get_mut(&id) {
                 w.assigned.insert(t);
             }
+            let dispatch = new_id();
             self.inflight.insert(
                 t,
                 Inflight {
                     worker: id.clone(),
+                    dispatch,
                     deadline: now + self.lease,
                 },
             );
-            out.push((t, id));
+            out.push((t, id, dispatch));
         }
         out
     }
@@ -243,6 +288,12 @@ impl Scheduler {
     #[must_use]
     pub fn is_queued(&self, t: TrialId) -> bool {
         self.queue.contains(&t)
+    }
+
+    /// The dispatch id `t` is in flight under.
+    #[must_use]
+    pub fn dispatch_of(&self, t: TrialId) -> Option<u64> {
+        self.inflight.get(&t).map(|f| f.dispatch)
     }
 
     /// The worker `t` is in flight on.

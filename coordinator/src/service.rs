@@ -24,7 +24,7 @@ use zenoh::{bytes::Encoding, sample::SampleKind, Session};
 use crate::{
     evolve::{DecidedIteration, OpenedIteration},
     run::{Effect, FailureVerdict, Run, RunError},
-    schedule::Scheduler,
+    schedule::{Answer, Scheduler},
 };
 
 /// Settings of the coordinator service.
@@ -63,6 +63,8 @@ pub struct Counters {
     pub failures: u64,
     /// Workers set aside for failing trials that others ran.
     pub set_aside: Vec<String>,
+    /// Refused messages per reason.
+    pub refused_reasons: BTreeMap<String, u64>,
 }
 
 /// A worker that failed this many trials which others then ran is set aside.
@@ -117,6 +119,8 @@ struct State {
     trials_done: u64,
     /// Per worker: trials it failed that another worker then ran.
     bad: HashMap<String, u32>,
+    /// (source, reason) pairs already logged.
+    logged: std::collections::HashSet<(String, String)>,
 }
 
 impl State {
@@ -194,6 +198,23 @@ impl State {
         Ok(())
     }
 
+    /// Refuses a message from `source` for `reason`: counted per reason, logged once per source and reason.
+    fn refuse(&mut self, source: &str, reason: &str) {
+        self.counters.refused += 1;
+        *self
+            .counters
+            .refused_reasons
+            .entry(reason.to_string())
+            .or_default() += 1;
+        if self.logged.insert((source.to_string(), reason.to_string())) {
+            tracing::warn!(
+                source,
+                reason,
+                "refused (further ones from this source for this reason are only counted)"
+            );
+        }
+    }
+
     /// A trial was run: every other worker that failed it gets a mark.
     fn ran_elsewhere(&mut self, t: (u64, u32), by: &str) {
         for w in self.run.failed_workers(t.0, t.1) {
@@ -265,6 +286,7 @@ pub async fn serve(
         started: Instant::now(),
         trials_done: 0,
         bad: HashMap::new(),
+        logged: std::collections::HashSet::new(),
     };
     if let Some(g) = st.run.exhausted() {
         return Err(ServiceError::GaveUp(g));
@@ -293,14 +315,8 @@ pub async fn serve(
                 let s = s.map_err(zerr)?;
                 let bytes = s.payload().to_bytes();
                 match TrialOutcome::decode(&bytes) {
-                    Err(e) => {
-                        st.counters.refused += 1;
-                        tracing::warn!(error = %e, "refused a message on the outcomes topic");
-                    }
-                    Ok(o) if o.run != name => {
-                        st.counters.refused += 1;
-                        tracing::warn!(run = %o.run, "refused an outcome for an unknown run");
-                    }
+                    Err(e) => st.refuse("an undecodable message", &format!("outcome: {e}")),
+                    Ok(o) if o.run != name => st.refuse(&o.worker, "outcome for another run"),
                     Ok(o) => on_outcome(&session, &mut st, o, events.as_ref()).await?,
                 }
             }
@@ -309,30 +325,24 @@ pub async fn serve(
                 match TrialFailure::decode(&s.payload().to_bytes()) {
                     Ok(f) if f.run == name => {
                         let t = (f.iteration, f.trial);
-                        if st.sched.answered(t, &f.worker, Instant::now()) {
-                            tracing::warn!(worker = %f.worker, iteration = f.iteration, trial = f.trial, reason = %f.reason, "a worker could not run a trial");
-                            st.failed(t, &f.worker, &f.reason)?;
-                            dispatch(&session, &mut st).await;
-                        } else {
-                            st.counters.refused += 1;
-                            tracing::warn!(worker = %f.worker, "refused a failure report for a trial that worker does not hold");
+                        match st.sched.answered(t, &f.worker, f.dispatch, Instant::now()) {
+                            Answer::Held => {
+                                tracing::warn!(worker = %f.worker, iteration = f.iteration, trial = f.trial, reason = %f.reason, "a worker could not run a trial");
+                                st.failed(t, &f.worker, &f.reason)?;
+                                dispatch(&session, &mut st).await;
+                            }
+                            other => st.refuse(&f.worker, &format!("failure report: {}", other.reason())),
                         }
                     }
-                    Ok(_) => st.counters.refused += 1,
-                    Err(e) => {
-                        st.counters.refused += 1;
-                        tracing::warn!(error = %e, "refused a message on the failures topic");
-                    }
+                    Ok(f) => st.refuse(&f.worker, "failure report for another run"),
+                    Err(e) => st.refuse("an undecodable message", &format!("failure report: {e}")),
                 }
             }
             s = presence.recv_async() => {
                 let s = s.map_err(zerr)?;
                 match WorkerPresence::decode(&s.payload().to_bytes()) {
                     Ok(p) => st.sched.worker_seen(&p.worker, Some(p.slots), Instant::now()),
-                    Err(e) => {
-                        st.counters.refused += 1;
-                        tracing::warn!(error = %e, "refused a presence message");
-                    }
+                    Err(e) => st.refuse("an undecodable message", &format!("presence: {e}")),
                 }
             }
             s = live.recv_async() => {
@@ -414,6 +424,31 @@ async fn put_json(session: &Session, key: &str, body: String) {
     }
 }
 
+/// The most a trial's torso can travel, m.
+pub const PLAUSIBLE_DISTANCE_M: f64 = 100.0;
+
+/// Whether an outcome could be a real trial of `duration_s`.
+fn plausible(o: &TrialOutcome, duration_s: f64) -> Result<(), String> {
+    if o.x_m.abs() > PLAUSIBLE_DISTANCE_M || o.y_m.abs() > PLAUSIBLE_DISTANCE_M {
+        return Err(format!(
+            "x {} m, y {} m (beyond {PLAUSIBLE_DISTANCE_M} m)",
+            o.x_m, o.y_m
+        ));
+    }
+    if !(0.0..=duration_s + 1e-6).contains(&o.sim_time_s) {
+        return Err(format!(
+            "simulated time {} s outside [0, {duration_s}] s",
+            o.sim_time_s
+        ));
+    }
+    if o.fall_time_s
+        .is_some_and(|t| t > o.sim_time_s + 1e-9 || t < 0.0)
+    {
+        return Err("fall time after the simulated time".into());
+    }
+    Ok(())
+}
+
 async fn on_outcome(
     session: &Session,
     st: &mut State,
@@ -421,7 +456,25 @@ async fn on_outcome(
     events: Option<&tokio::sync::mpsc::UnboundedSender<Event>>,
 ) -> Result<(), ServiceError> {
     let t = (o.iteration, o.trial);
-    st.sched.answered(t, &o.worker, Instant::now());
+    let answer = st.sched.answered(t, &o.worker, o.dispatch, Instant::now());
+    if answer == Answer::WrongDispatch {
+        // The holder answered under another id: it misbehaves; the trial fails on it.
+        st.refuse(&o.worker, answer.reason());
+        st.failed(t, &o.worker, "answered under a wrong dispatch id")?;
+        return Ok(());
+    }
+    if answer != Answer::Held {
+        // Never journaled: only the answer to a dispatch in flight counts
+        // (a late answer after the lease passed included).
+        st.refuse(&o.worker, answer.reason());
+        return Ok(());
+    }
+    let duration = st.run.evolve().experiment().trial_duration_s;
+    if let Err(why) = plausible(&o, duration) {
+        tracing::warn!(worker = %o.worker, iteration = o.iteration, trial = o.trial, %why, "an implausible outcome counts as a failure");
+        st.failed(t, &o.worker, &format!("implausible outcome: {why}"))?;
+        return Ok(());
+    }
 
     match st
         .run
@@ -450,8 +503,12 @@ async fn on_outcome(
             handle_effects(session, st, effects, events).await?;
         }
         Err(RunError::Refused(e)) => {
-            st.counters.refused += 1;
-            tracing::warn!(error = %e, worker = %o.worker, "refused an outcome");
+            let reason = match e {
+                crate::evolve::OutcomeError::WrongSeed { .. } => "wrong seed",
+                crate::evolve::OutcomeError::Invalid { .. } => "invalid numbers",
+                _ => "trial not open",
+            };
+            st.refuse(&o.worker, reason);
         }
         Err(e) => return Err(e.into()),
     }
@@ -508,16 +565,20 @@ async fn handle_effects(
 
 async fn dispatch(session: &Session, st: &mut State) {
     let run = &st.run;
-    let sends = st
-        .sched
-        .dispatch(Instant::now(), &|t| run.failed_workers(t.0, t.1));
-    for (t, id) in sends {
+    // Dispatch ids are unguessable: an answer must echo the one it was sent.
+    let mut rng = rand::rng();
+    let sends = st.sched.dispatch(
+        Instant::now(),
+        &|t| run.failed_workers(t.0, t.1),
+        &mut || rand::Rng::random::<u64>(&mut rng),
+    );
+    for (t, id, dispatch_id) in sends {
         let Some(opened) = st.opened.get(&t.0) else {
             st.sched.forget(t);
             continue;
         };
         st.dispatch += 1;
-        let req = match st.run.request(opened, t.1, st.dispatch) {
+        let req = match st.run.request(opened, t.1, dispatch_id) {
             Ok(r) => r,
             Err(e) => {
                 tracing::error!(error = %e, "a queued trial has no request; dropped");

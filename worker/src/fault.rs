@@ -1,7 +1,8 @@
 //! Fault hooks for tests, switched on at run time by an environment variable
 //! (never by a second build): `NAOFARM_FAULT_TRIAL=MODE[@I/K]` makes every
 //! trial (or only trial K of iteration I) misbehave, where MODE is `fail` (an
-//! error), `panic`, or `nan` (a non-finite result). Without the variable,
+//! error), `panic`, `nan` (a non-finite result) or `forge` (x = 10⁶ m, a
+//! result no robot walks). Without the variable,
 //! [`run_trial`] is exactly [`crate::run_trial`].
 
 use protocol::TrialRequest;
@@ -16,6 +17,7 @@ enum Mode {
     Fail,
     Panic,
     Nan,
+    Forge,
 }
 
 fn fault_for(req: &TrialRequest) -> Option<Mode> {
@@ -28,6 +30,7 @@ fn fault_for(req: &TrialRequest) -> Option<Mode> {
         "fail" => Mode::Fail,
         "panic" => Mode::Panic,
         "nan" => Mode::Nan,
+        "forge" => Mode::Forge,
         _ => return None,
     };
     if let Some(t) = target {
@@ -37,6 +40,21 @@ fn fault_for(req: &TrialRequest) -> Option<Mode> {
         }
     }
     Some(mode)
+}
+
+/// `NAOFARM_FAULT_OUTCOME=wrong-dispatch|other-run|unsent`: the worker
+/// tampers with every outcome it sends (another dispatch id, another run's
+/// name, a trial it was never sent).
+pub const OUTCOME_FAULT_VAR: &str = "NAOFARM_FAULT_OUTCOME";
+
+/// Applies the outcome fault hook, if set.
+pub fn tamper(o: &mut protocol::TrialOutcome) {
+    match std::env::var(OUTCOME_FAULT_VAR).as_deref() {
+        Ok("wrong-dispatch") => o.dispatch ^= 0x5a5a,
+        Ok("other-run") => o.run = format!("{}-other", o.run),
+        Ok("unsent") => o.trial += 1000,
+        _ => {}
+    }
 }
 
 /// Runs one trial, unless a fault hook says otherwise.
@@ -53,6 +71,10 @@ pub fn run_trial(req: &TrialRequest) -> Result<Measurement, TrialError> {
         ),
         Some(Mode::Nan) => crate::run_trial(req).map(|mut t| {
             t.x_m = f64::NAN;
+            t
+        }),
+        Some(Mode::Forge) => crate::run_trial(req).map(|mut t| {
+            t.x_m = 1e6;
             t
         }),
     }

@@ -159,7 +159,8 @@ pub async fn serve(
                     };
                     match result {
                         Ok(m) => {
-                            let o = TrialOutcome::answer(&asked, id, m, started.elapsed().as_secs_f64());
+                            let mut o = TrialOutcome::answer(&asked, id, m, started.elapsed().as_secs_f64());
+                            crate::fault::tamper(&mut o);
                             put_message(&session, &keys::outcomes(&prefix), &o).await;
                             true
                         }
