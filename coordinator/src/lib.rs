@@ -8,7 +8,8 @@
 //!   (a run on disk: create, resume, extend, salvage, replay a farm trial);
 //! - **transport**: [`schedule`] (who runs which trial, leases and liveness, a
 //!   pure part under the caller's clock) and [`service`] (the zenoh loop that
-//!   moves messages between workers, watchers and the run).
+//!   moves messages between workers, watchers and the run), and for watchers
+//!   [`follow`] (when a followed run has ended, a pure state machine).
 //!
 //! Tooling around CLOP (benchmarks, baselines, local tuning) lives in
 //! `naofarm-tools`, not here. This crate must not print, exit or parse
@@ -17,6 +18,7 @@
 
 pub mod clop;
 pub mod evolve;
+pub mod follow;
 pub mod journal;
 pub mod lock;
 pub mod run;

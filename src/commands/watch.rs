@@ -6,6 +6,7 @@
 use std::time::{Duration, Instant};
 
 use anyhow::anyhow;
+use coordinator::follow::{Ending, Verdict};
 use protocol::{
     keys,
     wire::{IterationResult, RunStatus, TrialOutcome, WireMessage},
@@ -190,17 +191,14 @@ async fn follow(
     let mut last = status;
     let shutdown = tokio::signal::ctrl_c();
     tokio::pin!(shutdown);
-    // When the coordinator's token goes, its last messages may still be on
-    // the way (declarations overtake data): wait for them this long.
-    // The run ends when the coordinator says it finished or its token goes;
-    // results may still be on the way (other keys, other queues): wait for
-    // every planned iteration this long before calling the report incomplete.
-    let mut ending: Option<(tokio::time::Instant, bool)> = None; // (deadline, finished)
+    // When the run has ended, and whether every result arrived.
+    let mut ending = Ending::new(last.planned, Duration::from_secs(3));
     let far = tokio::time::Instant::now() + Duration::from_secs(86_400 * 365);
-    let grace = Duration::from_secs(3);
     loop {
-        if let Some((_, finished)) = ending {
-            if view.reported() as u64 >= last.planned {
+        let reported = view.reported() as u64;
+        match ending.verdict(reported, tokio::time::Instant::now()) {
+            Verdict::Going => {}
+            Verdict::Complete { finished } => {
                 if !finished {
                     last.decided = last.planned;
                     last.finished = true;
@@ -208,6 +206,20 @@ async fn follow(
                 }
                 view.finish(&last, serde_json::json!({}));
                 return Ok(());
+            }
+            Verdict::Incomplete { finished } => {
+                view.abandon();
+                return Err(Failure::Job(if finished {
+                    anyhow!(
+                        "run `{run}` finished, but only {reported} of its {} results reached this watcher",
+                        ending.planned()
+                    )
+                } else {
+                    anyhow!(
+                        "the coordinator of run `{run}` stopped after {reported} of {} iterations",
+                        ending.planned()
+                    )
+                }));
             }
         }
         tokio::select! {
@@ -236,9 +248,7 @@ async fn follow(
                 match RunStatus::from_json(&String::from_utf8_lossy(&s.payload().to_bytes())) {
                     Ok(st) if st.run == run => {
                         view.status(&st);
-                        if st.finished {
-                            ending = Some((tokio::time::Instant::now() + grace, true));
-                        }
+                        ending.status(st.planned, st.finished, tokio::time::Instant::now());
                         last = st;
                     }
                     Ok(_) => {}
@@ -247,27 +257,12 @@ async fn follow(
             }
             s = coordinator.recv_async() => {
                 let s = s.map_err(zerr)?;
-                if s.kind() == SampleKind::Delete && ending.is_none() {
-                    ending = Some((tokio::time::Instant::now() + grace, false));
+                if s.kind() == SampleKind::Delete {
+                    ending.coordinator_gone(tokio::time::Instant::now());
                 }
             }
-            () = tokio::time::sleep_until(ending.map_or(far, |e| e.0)) => {
-                view.abandon();
-                let finished = ending.is_some_and(|e| e.1);
-                return Err(Failure::Job(if finished {
-                    anyhow!(
-                        "run `{run}` finished, but only {} of its {} results reached this watcher",
-                        view.reported(),
-                        last.planned
-                    )
-                } else {
-                    anyhow!(
-                        "the coordinator of run `{run}` stopped after {} of {} iterations",
-                        view.reported(),
-                        last.planned
-                    )
-                }));
-            }
+            // Past the grace period: the verdict at the top of the loop says so.
+            () = tokio::time::sleep_until(ending.deadline().unwrap_or(far)) => {}
             _ = &mut shutdown => {
                 view.abandon();
                 return Ok(());

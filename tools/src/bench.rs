@@ -239,7 +239,7 @@ pub fn regret(
                 .collect();
             let mut all: Vec<(usize, Vec<f64>)> = handles
                 .into_iter()
-                .flat_map(|h| h.join().unwrap_or_default())
+                .flat_map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
                 .collect();
             all.sort_by_key(|(r, _)| *r);
             all.into_iter().map(|(_, v)| v).collect()
@@ -332,8 +332,30 @@ mod tests {
     }
 
     #[test]
-    fn random_search_runs_on_the_same_streams() {
-        let rows = regret(Problem::Rosenbrock, &[400], 8, 1, &[Algorithm::Random], 2);
-        assert!(rows[0].mean_regret >= 0.0 && rows[0].mean_regret < 0.5);
+    fn the_same_seed_gives_the_same_regrets_whatever_the_threads() {
+        let algs = [Algorithm::Random, Algorithm::Clop];
+        let bits = |rows: &[Row]| -> Vec<(u64, u64, u64)> {
+            rows.iter()
+                .map(|r| {
+                    (
+                        r.mean_regret.to_bits(),
+                        r.median_regret.to_bits(),
+                        r.p90_regret.to_bits(),
+                    )
+                })
+                .collect()
+        };
+        let one = regret(Problem::Rosenbrock, &[200], 6, 1, &algs, 1);
+        let three = regret(Problem::Rosenbrock, &[200], 6, 1, &algs, 3);
+        assert_eq!(
+            bits(&one),
+            bits(&three),
+            "the streams are per (seed, run), not per thread"
+        );
+        let other = regret(Problem::Rosenbrock, &[200], 6, 2, &algs, 1);
+        assert_ne!(bits(&one), bits(&other), "another seed, other streams");
+        assert!(one
+            .iter()
+            .all(|r| r.mean_regret >= 0.0 && r.mean_regret < 0.5));
     }
 }

@@ -71,18 +71,21 @@ pub struct SimSettings {
 }
 
 impl Default for SimSettings {
+    /// The experiment's default `[physics]` (defined once, in `protocol::Physics`)
+    /// and this module's contact and motor constants.
     fn default() -> Self {
+        let physics = protocol::Physics::default();
         Self {
-            substeps: 2,
-            solver_iterations: 1,
-            pgs_iterations: 12,
+            substeps: physics.substeps,
+            solver_iterations: physics.solver_iterations as usize,
+            pgs_iterations: physics.pgs_iterations as usize,
             friction: 1.0,
             contact_hz: 500.0,
             contact_prediction_m: 0.005,
             weld_upper_body: true,
             motor_damping: 1000.0,
             joint_damping: 0.0,
-            armature_kg_m2: 0.0,
+            armature_kg_m2: physics.armature_kg_m2,
             impulse_joints: false,
             every_limit_row: false,
         }
