@@ -435,64 +435,7 @@ fn a_killed_coordinator_resumes_to_the_same_history() {
 }
 
 #[test]
-fn a_worker_that_fails_every_trial_is_set_aside_and_the_history_is_the_runs() {
-    let dir = scratch("set-aside");
-    let exp = experiment(&dir, 20);
-    let local = dir.join("local");
-    succeed(
-        naofarm()
-            .args(["run", "--json", "--workers", "2"])
-            .arg(&exp)
-            .arg("--out")
-            .arg(&local),
-    );
-    let port = free_port();
-    let out = dir.join("run");
-    let mut bad = Proc::spawn(
-        naofarm()
-            .args(["worker", "--connect", &format!("tcp/127.0.0.1:{port}")])
-            .args(["--slots", "2", "--min-trial-ms", "5"])
-            .env("NAOFARM_FAULT_TRIAL", "fail")
-            .stdout(Stdio::null()),
-        &dir,
-        "failing-worker",
-    );
-    // All workers first (they retry until the coordinator listens); the bad
-    // one has the most free slots, so it is offered work first.
-    let mut ws = vec![worker(port, 1, 20), worker(port, 1, 20)];
-    let mut c = Coordinator::start(&exp, &out, port, 30.0);
-    let status = c.wait_exit();
-    kill_all(&mut ws);
-    bad.kill();
-    assert!(status.success(), "{:?}", c.seen);
-    let finished: serde_json::Value = c
-        .seen
-        .iter()
-        .find(|l| l.starts_with("{\"accepted\"") || l.contains("\"event\":\"finished\""))
-        .map(|l| serde_json::from_str(l).unwrap())
-        .expect("a finished line");
-    let set_aside = finished["set_aside"].as_array().expect("set_aside");
-    assert_eq!(set_aside.len(), 1, "{finished}");
-    assert!(finished["failures"].as_u64().unwrap() >= 3, "{finished}");
-    let records = journal(&out);
-    assert_every_trial_once(&records, 20);
-    let failed: Vec<&Record> = records
-        .iter()
-        .filter(|r| matches!(r, Record::Failed { worker, .. } if serde_json::json!(worker) == set_aside[0]))
-        .collect();
-    assert!(
-        failed.len() >= 3,
-        "the failures are journaled with their worker"
-    );
-    assert_eq!(
-        bits(&decided(&records)),
-        bits(&decided(&journal(&local))),
-        "the same history as the run alone"
-    );
-}
-
-#[test]
-fn forged_and_misaddressed_outcomes_are_never_journaled() {
+fn failing_forging_and_misaddressing_workers_never_reach_the_journal() {
     let dir = scratch("tamper");
     let exp = experiment(&dir, 12);
     let local = dir.join("local");
@@ -504,31 +447,38 @@ fn forged_and_misaddressed_outcomes_are_never_journaled() {
             .arg(&local),
     );
     let want = bits(&decided(&journal(&local)));
-    for (var, mode, reason) in [
-        ("NAOFARM_FAULT_TRIAL", "forge", None),
+    // (hook, mode, what the coordinator logs when it first answers the bad
+    // worker, the refusal reason it counts — none: a failure of the trial).
+    for (var, mode, seen, reason) in [
+        ("NAOFARM_FAULT_TRIAL", "fail", "could not run a trial", None),
+        ("NAOFARM_FAULT_TRIAL", "forge", "implausible outcome", None),
         (
             "NAOFARM_FAULT_OUTCOME",
             "wrong-dispatch",
+            "refused",
             Some("wrong dispatch id"),
         ),
         (
             "NAOFARM_FAULT_OUTCOME",
             "other-run",
+            "refused",
             Some("outcome for another run"),
         ),
         (
             "NAOFARM_FAULT_OUTCOME",
             "unsent",
+            "refused",
             Some("trial not in flight"),
         ),
     ] {
         let port = free_port();
         let out = dir.join(mode);
-        // All workers first; the tampering one has the most free slots, so it
-        // is offered work first.
-        let mut bad = worker_with(port, 2, 5, Some((var, mode)));
-        let mut ws = vec![worker(port, 1, 20), worker(port, 1, 20)];
+        // The bad worker alone first, until the coordinator has answered it;
+        // then the good ones.
         let mut c = Coordinator::start(&exp, &out, port, 1.0);
+        let mut bad = worker_with(port, 2, 5, Some((var, mode)));
+        c.wait_log(seen);
+        let mut ws = vec![worker(port, 1, 20), worker(port, 1, 20)];
         let status = c.wait_exit();
         let bad_id = worker_id(&bad);
         bad.kill();
@@ -540,7 +490,7 @@ fn forged_and_misaddressed_outcomes_are_never_journaled() {
             !records
                 .iter()
                 .any(|r| matches!(r, Record::Outcome { worker, .. } if *worker == bad_id)),
-            "{mode}: nothing of the tampering worker is journaled"
+            "{mode}: nothing of the bad worker is journaled"
         );
         assert_eq!(
             bits(&decided(&records)),
@@ -554,14 +504,26 @@ fn forged_and_misaddressed_outcomes_are_never_journaled() {
                 "{mode}: counted as `{r}`: {f}"
             ),
             None => {
-                let implausible = records.iter().any(|r| {
-                    matches!(r, Record::Failed { worker, reason, .. }
-                        if *worker == bad_id && reason.contains("implausible"))
-                });
+                // Each failure is journaled with its worker; after three trials
+                // that others then ran, the worker is set aside and named.
+                let failed: Vec<&str> = records
+                    .iter()
+                    .filter_map(|r| match r {
+                        Record::Failed { worker, reason, .. } if *worker == bad_id => {
+                            Some(reason.as_str())
+                        }
+                        _ => None,
+                    })
+                    .collect();
                 assert!(
-                    implausible,
-                    "{mode}: a forged result is a failure of the trial: {f}"
+                    failed.len() >= 3,
+                    "{mode}: failures journaled {failed:?}: {f}"
                 );
+                assert!(
+                    failed.iter().all(|r| r.contains(seen) || mode == "fail"),
+                    "{failed:?}"
+                );
+                assert_eq!(f["set_aside"], serde_json::json!([bad_id]), "{mode}: {f}");
             }
         }
     }
