@@ -868,3 +868,47 @@ mod tests {
         }
     }
 }
+
+#[cfg(test)]
+mod cost {
+    use super::*;
+
+    /// The cost of one decision (tell, a full refresh, ask) at the experiment
+    /// file's upper bounds: nine parameters, n_mcmc 10000, up to 100 weight
+    /// iterations, after 5000 outcomes.
+    #[test]
+    #[ignore = "a measurement: prints the time of one decision at the bounds"]
+    fn one_decision_at_the_bounds() {
+        let settings = ClopSettings {
+            n_mcmc: 10_000,
+            max_weight_iterations: 100,
+            ..ClopSettings::default()
+        };
+        let mut c = Clop::new(vec![Dim::linear(0.0, 1.0); 9], settings);
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let mut play = |c: &mut Clop| {
+            let u: Vec<f64> = (0..9).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let x: f64 = u.iter().map(|v| (v - 0.3) * (v - 0.3)).sum();
+            let o = if rng.random::<f64>() < 1.0 / (1.0 + x.exp()) {
+                Outcome::Win
+            } else {
+                Outcome::Loss
+            };
+            c.tell(&u, o);
+        };
+        for _ in 0..4999 {
+            play(&mut c);
+        }
+        let t0 = std::time::Instant::now();
+        play(&mut c);
+        c.refresh();
+        let told = t0.elapsed();
+        let _ = c.ask(7);
+        eprintln!(
+            "one decision at the bounds: tell + refresh {:.1} ms, ask {:.1} ms, {} weight terms",
+            told.as_secs_f64() * 1e3,
+            (t0.elapsed() - told).as_secs_f64() * 1e3,
+            c.n_terms()
+        );
+    }
+}

@@ -95,25 +95,24 @@ mod tests {
 
     const GRACE: Duration = Duration::from_secs(3);
 
+    /// The verdict now with `reported` iterations reported.
+    fn at(e: &Ending, reported: u64) -> Verdict {
+        e.verdict(reported, Instant::now())
+    }
+
+    const DONE: Verdict = Verdict::Complete { finished: true };
+    const GONE: Verdict = Verdict::Complete { finished: false };
+    const SHORT: Verdict = Verdict::Incomplete { finished: true };
+    const LOST: Verdict = Verdict::Incomplete { finished: false };
+
     #[tokio::test(start_paused = true)]
     async fn a_finished_run_completes_when_its_last_results_arrive() {
         let mut e = Ending::new(10, GRACE);
-        assert_eq!(
-            e.verdict(10, Instant::now()),
-            Verdict::Going,
-            "not ended yet"
-        );
+        assert_eq!(at(&e, 10), Verdict::Going, "not ended yet");
         e.status(10, true, Instant::now());
-        assert_eq!(
-            e.verdict(8, Instant::now()),
-            Verdict::Going,
-            "results on the way"
-        );
+        assert_eq!(at(&e, 8), Verdict::Going, "results on the way");
         advance(Duration::from_secs(1)).await;
-        assert_eq!(
-            e.verdict(10, Instant::now()),
-            Verdict::Complete { finished: true }
-        );
+        assert_eq!(at(&e, 10), DONE);
     }
 
     #[tokio::test(start_paused = true)]
@@ -121,34 +120,22 @@ mod tests {
         let mut e = Ending::new(10, GRACE);
         e.status(10, true, Instant::now());
         advance(GRACE).await;
-        assert_eq!(
-            e.verdict(9, Instant::now()),
-            Verdict::Incomplete { finished: true }
-        );
+        assert_eq!(at(&e, 9), SHORT);
     }
 
     #[tokio::test(start_paused = true)]
     async fn a_coordinator_that_goes_away_ends_the_run_after_the_grace() {
         let mut e = Ending::new(20, GRACE);
         e.coordinator_gone(Instant::now());
-        assert_eq!(e.verdict(5, Instant::now()), Verdict::Going);
+        assert_eq!(at(&e, 5), Verdict::Going);
         // A finished status that arrives after the token went still counts.
         e.status(20, true, Instant::now());
         advance(GRACE).await;
-        assert_eq!(
-            e.verdict(5, Instant::now()),
-            Verdict::Incomplete { finished: true }
-        );
+        assert_eq!(at(&e, 5), SHORT);
         let mut gone = Ending::new(20, GRACE);
         gone.coordinator_gone(Instant::now());
         advance(GRACE).await;
-        assert_eq!(
-            gone.verdict(5, Instant::now()),
-            Verdict::Incomplete { finished: false }
-        );
-        assert_eq!(
-            gone.verdict(20, Instant::now()),
-            Verdict::Complete { finished: false }
-        );
+        assert_eq!(at(&gone, 5), LOST);
+        assert_eq!(at(&gone, 20), GONE);
     }
 }

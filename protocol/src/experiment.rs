@@ -424,12 +424,17 @@ impl Experiment {
                 return Err(invalid(field, format!("{v} is not in [0, {hi}]")));
             }
         }
-        if c.max_weight_iterations > 1000 {
-            return Err(invalid("clop.max_weight_iterations", "must be in 0..=1000"));
+        if c.max_weight_iterations > 100 {
+            return Err(invalid(
+                "clop.max_weight_iterations",
+                "must be in 0..=100 (0: to convergence, at most 100)",
+            ));
         }
         finite_positive("clop.prior_strength", c.prior_strength)?;
-        if c.n_mcmc == 0 || c.n_mcmc > 100_000 {
-            return Err(invalid("clop.n_mcmc", "must be in 1..=100000"));
+        // Bounds that keep one CLOP decision (a refresh and an ask, inside the
+        // coordinator's event loop) well under a second with every parameter.
+        if c.n_mcmc == 0 || c.n_mcmc > 10_000 {
+            return Err(invalid("clop.n_mcmc", "must be in 1..=10000"));
         }
         self.physics
             .validate()
