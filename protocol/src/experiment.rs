@@ -431,8 +431,9 @@ impl Experiment {
             ));
         }
         finite_positive("clop.prior_strength", c.prior_strength)?;
-        // Bounds that keep one CLOP decision (a refresh and an ask, inside the
-        // coordinator's event loop) well under a second with every parameter.
+        // Bounds on the cost of one CLOP decision (a refresh and an ask, inside
+        // the coordinator's event loop); measured by clop's ignored test
+        // `one_decision_at_the_bounds`.
         if c.n_mcmc == 0 || c.n_mcmc > 10_000 {
             return Err(invalid("clop.n_mcmc", "must be in 1..=10000"));
         }
