@@ -334,6 +334,23 @@ impl Evolve {
         self.decided >= self.exp.iterations
     }
 
+    /// Whether trial `trial` of iteration `iteration` is open and without an outcome.
+    #[must_use]
+    pub fn is_pending(&self, iteration: u64, trial: u32) -> bool {
+        self.pending
+            .get(&iteration)
+            .and_then(|p| p.results.get(trial as usize))
+            .is_some_and(Option::is_none)
+    }
+
+    /// The parameter set of an open iteration.
+    #[must_use]
+    pub fn open_params(&self, iteration: u64) -> Option<&[f64]> {
+        self.pending
+            .get(&iteration)
+            .map(|p| p.opened.params.as_slice())
+    }
+
     /// Open iterations and the trial indices still without an outcome.
     #[must_use]
     pub fn missing(&self) -> Vec<(OpenedIteration, Vec<u32>)> {

@@ -480,10 +480,8 @@ impl Run {
         }
         let params = self
             .ev
-            .missing()
-            .into_iter()
-            .find(|(o, _)| o.iteration == iteration)
-            .map(|(o, _)| self.ev.experiment().full_params(&o.params))
+            .open_params(iteration)
+            .map(|p| self.ev.experiment().full_params(p))
             .unwrap_or_default();
         FailureVerdict::GiveUp(GaveUp {
             iteration,
@@ -522,10 +520,7 @@ impl Run {
     /// Whether an outcome for (iteration, trial) would still be taken.
     #[must_use]
     pub fn is_pending(&self, iteration: u64, trial: u32) -> bool {
-        self.ev
-            .missing()
-            .iter()
-            .any(|(o, ks)| o.iteration == iteration && ks.contains(&trial))
+        self.ev.is_pending(iteration, trial)
     }
 
     /// The trial request for trial `k` of an opened iteration.
@@ -598,8 +593,7 @@ pub struct FarmTrial {
 
 /// Reads trial `trial` of iteration `iteration` of the run in `dir` (only reads).
 pub fn farm_trial(dir: &Path, iteration: u64, trial: u32) -> Result<FarmTrial, RunError> {
-    let view = read_run(dir)?;
-    let records = Journal::read(dir)?.records();
+    let (view, records) = read_run_records(dir)?;
     let opened = records
         .iter()
         .find_map(|r| match r {
@@ -645,6 +639,11 @@ pub struct RunView {
 /// Reads the run in `dir`: damage is an error naming its offset; a torn tail is
 /// reported in [`RunView::tail`]. Reading never writes and takes no lock.
 pub fn read_run(dir: &Path) -> Result<RunView, RunError> {
+    read_run_records(dir).map(|(view, _)| view)
+}
+
+/// [`read_run`], with the journal's records (one read of the file).
+fn read_run_records(dir: &Path) -> Result<(RunView, Vec<Record>), RunError> {
     let scan = Journal::read(dir)?;
     if let Some(e) = scan.damage(&Journal::path_in(dir)) {
         return Err(e.into());
@@ -664,7 +663,7 @@ pub fn read_run(dir: &Path) -> Result<RunView, RunError> {
             _ => {}
         }
     }
-    Ok(RunView {
+    let view = RunView {
         experiment,
         decided,
         tail: scan.tail,
@@ -673,7 +672,8 @@ pub fn read_run(dir: &Path) -> Result<RunView, RunError> {
         version,
         records: records.len(),
         extensions,
-    })
+    };
+    Ok((view, records))
 }
 
 /// An earlier run's H and ν′ for `--from RUN_DIR` (its own imports included),
@@ -691,10 +691,9 @@ pub struct FromRun {
 /// Reads an earlier run for `--from`: a different parameter set is refused
 /// (the names on each side); points outside `exp`'s bounds are left out.
 pub fn load_history(dir: &Path, exp: &Experiment) -> Result<FromRun, RunError> {
-    let view = read_run(dir)?;
-    let scan = Journal::read(dir)?;
+    let (view, records) = read_run_records(dir)?;
     let mut all = Imported::default();
-    for rec in scan.records() {
+    for rec in records {
         match rec {
             Record::Header { imported, .. } => all = imported,
             Record::Decided(d) => {

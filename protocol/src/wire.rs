@@ -337,18 +337,9 @@ impl WireMessage for TrialOutcome {
         if self.worker.len() > 128 {
             return Err(("worker", "longer than 128 bytes".into()));
         }
-        finite("x_m", self.x_m)?;
-        finite("y_m", self.y_m)?;
-        finite_opt("fall_time_s", self.fall_time_s)?;
-        finite("sim_time_s", self.sim_time_s)?;
         finite("wall_time_s", self.wall_time_s)?;
-        if self.sim_time_s < 0.0 {
-            return Err(("sim_time_s", "negative".into()));
-        }
-        if self.fell != self.fall_time_s.is_some() {
-            return Err(("fall_time_s", "present exactly when fell is true".into()));
-        }
-        Ok(())
+        // One definition of a valid measurement, shared with the trial models.
+        self.measurement().check().map_err(|m| ("measurement", m))
     }
 }
 
