@@ -51,6 +51,30 @@ pub enum Command {
         /// Minimum wall time per trial in ms (paces the synthetic model for farm tests and benchmarks).
         #[arg(long, default_value_t = 0)]
         min_trial_ms: u64,
+        #[command(flatten)]
+        limits: WorkerLimits,
+    },
+    /// A zenoh router inside naofarm (cluster use): runs, workers and watchers meet on it.
+    Router {
+        /// Listen on this endpoint (repeatable; default tcp/0.0.0.0:7447).
+        #[arg(long = "listen", value_name = "ENDPOINT")]
+        listen: Vec<String>,
+        /// A zenoh configuration file in zenohd's json5 format; flags override it.
+        #[arg(long = "config", value_name = "FILE")]
+        config: Option<PathBuf>,
+    },
+    /// Pause, resume, stop a run or change its priority, from any machine while it runs.
+    Ctl {
+        /// The run: its id, the start of its id, or its name if no other live run has it.
+        run: String,
+        /// pause | resume | stop | priority N
+        #[arg(value_name = "ACTION")]
+        action: Vec<String>,
+        #[command(flatten)]
+        net: NetArgs,
+        /// Give up when no coordinator answers within this many seconds.
+        #[arg(long, default_value_t = 10.0)]
+        timeout_s: f64,
     },
     /// Print the rebuilt robot: mass, segment lengths, hip-to-sole height, joint table.
     Model {
@@ -126,6 +150,11 @@ pub struct JobArgs {
     /// a resumed run may raise it to retry the trial that stopped it).
     #[arg(long, default_value_t = 3)]
     pub max_trial_failures: u32,
+    /// The run's priority, 1..=1000: its share of a shared fleet follows it
+    /// (default 1 for a new run; a resumed run keeps its journaled priority
+    /// unless this is given).
+    #[arg(long)]
+    pub priority: Option<u32>,
 }
 
 /// Benchmarks.
@@ -221,6 +250,20 @@ pub struct NetArgs {
     /// Key prefix of every topic.
     #[arg(long, default_value = protocol::keys::DEFAULT_PREFIX)]
     pub prefix: String,
+}
+
+/// What a worker refuses to run (it gives such trials back with the reason).
+#[derive(Args, Debug, Clone)]
+pub struct WorkerLimits {
+    /// Longest trial accepted, simulated seconds.
+    #[arg(long, default_value_t = 3600.0)]
+    pub max_duration_s: f64,
+    /// Most physics substeps per 20 ms cycle accepted.
+    #[arg(long, default_value_t = 50)]
+    pub max_substeps: u32,
+    /// Trial models served, comma-separated (nao, synthetic).
+    #[arg(long, default_value = "nao,synthetic", value_delimiter = ',')]
+    pub models: Vec<String>,
 }
 
 /// Arguments of `stand`.

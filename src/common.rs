@@ -14,6 +14,14 @@ pub enum Failure {
     Job(anyhow::Error),
 }
 
+/// A coordinator service failure: serving a run twice is a usage error (exit 2), the rest job failures.
+pub fn service_failure(e: coordinator::service::ServiceError) -> Failure {
+    match e {
+        coordinator::service::ServiceError::AlreadyServed { .. } => Failure::Usage(e.into()),
+        e => Failure::Job(e.into()),
+    }
+}
+
 /// Writes `text` to stdout; a closed pipe (`| head`) ends quietly.
 pub fn emit(text: &str) -> Result<(), Failure> {
     crate::out::write(text);

@@ -105,6 +105,16 @@ pub fn open_run(job: &JobArgs) -> Result<(Run, Vec<coordinator::run::Effect>), F
         e => Failure::Job(e.into()),
     })?;
     opened.0.set_failure_limit(job.max_trial_failures as usize);
+    if let Some(p) = job.priority {
+        let action = protocol::wire::Control::Priority(p);
+        action
+            .check()
+            .map_err(|e| Failure::Usage(anyhow!("--priority: {e}")))?;
+        opened
+            .0
+            .control(action, "--priority")
+            .map_err(|e| Failure::Job(e.into()))?;
+    }
     if let Some(before) = opened.0.extended_from() {
         eprintln!(
             "extending {} from {before} to {} iterations",
@@ -194,6 +204,13 @@ pub fn summary(
             "interrupted; resume with the same command (journal in {})",
             run_dir.display()
         ))),
+        Ended::Stopped(_, by) => {
+            eprintln!(
+                "stopped by `naofarm ctl` ({by}); resume with the same command (journal in {})",
+                run_dir.display()
+            );
+            Ok(())
+        }
     }
 }
 

@@ -163,7 +163,7 @@ fn worker_with(port: u16, slots: u32, pace_ms: u64, fault: Option<(&str, &str)>)
             "--min-trial-ms",
             &pace_ms.to_string(),
         ])
-        .env("RUST_LOG", "warn,naofarm_worker::service=info")
+        .env("RUST_LOG", "warn,naofarm_worker::service=debug")
         .stdout(Stdio::null());
     if let Some((var, value)) = fault {
         cmd.env(var, value);
@@ -207,22 +207,15 @@ fn worker_id(p: &Proc) -> String {
     }
 }
 
-/// The index of a worker of `ws` that the run in `out` has journaled an
-/// outcome of (so it is connected and being given work), waiting for one.
-fn a_busy_worker(out: &Path, ws: &[Proc]) -> usize {
-    let ids: Vec<String> = ws.iter().map(worker_id).collect();
+/// Waits until worker `p` has started a trial (its debug log says so).
+fn holding_a_trial(p: &Proc) {
     let deadline = Instant::now() + TIMEOUT;
-    loop {
-        let records = Journal::read(out).map(|s| s.records()).unwrap_or_default();
-        if let Some(i) = ids.iter().position(|id| {
-            records
-                .iter()
-                .any(|r| matches!(r, Record::Outcome { worker, .. } if worker == id))
-        }) {
-            return i;
-        }
-        assert!(Instant::now() < deadline, "no worker ran a trial");
-        std::thread::sleep(Duration::from_millis(20));
+    while !plain(&p.stderr()).contains("trial started") {
+        assert!(
+            Instant::now() < deadline,
+            "the worker never started a trial"
+        );
+        std::thread::sleep(Duration::from_millis(10));
     }
 }
 
@@ -331,10 +324,12 @@ fn a_killed_worker_loses_no_trial() {
     let port = free_port();
     let out = dir.join("run");
     let mut c = Coordinator::start(&exp, &out, port, 30.0);
-    let mut ws: Vec<Proc> = (0..3).map(|_| worker(port, 2, 20)).collect();
+    // Two quick workers and a slow one, killed while it holds a trial.
+    let mut ws: Vec<Proc> = (0..2).map(|_| worker(port, 2, 20)).collect();
     c.wait_decided(3);
-    let victim = a_busy_worker(&out, &ws);
-    ws[victim].kill();
+    ws.push(worker(port, 1, 60_000));
+    holding_a_trial(&ws[2]);
+    ws[2].kill();
     let status = c.wait_exit();
     kill_all(&mut ws);
     assert!(status.success(), "{:?}", c.seen);
@@ -385,9 +380,12 @@ fn a_frozen_worker_is_replaced_and_its_late_outcomes_ignored() {
     let port = free_port();
     let out = dir.join("run");
     let mut c = Coordinator::start(&exp, &out, port, 1.0);
-    let mut ws: Vec<Proc> = (0..3).map(|_| worker(port, 2, 20)).collect();
+    // Two quick workers and a slower one, frozen while it holds a trial.
+    let mut ws: Vec<Proc> = (0..2).map(|_| worker(port, 2, 20)).collect();
     c.wait_decided(2);
-    let frozen = a_busy_worker(&out, &ws);
+    ws.push(worker(port, 1, 500));
+    holding_a_trial(&ws[2]);
+    let frozen = 2;
     signal(&ws[frozen].child, "-STOP");
     // Frozen past its trials' 1 s lease but not its 3 s transport lease:
     // the trials go elsewhere, and the frozen worker's answers still arrive.
@@ -741,11 +739,11 @@ fn every_topic_matches_the_readme_field_tables() {
             break serde_json::from_str::<serde_json::Value>(&text).unwrap();
         }
     };
-    let status = ask(protocol::keys::status("naofarm", "farm"));
+    let status = ask("naofarm/farm/*/status".to_string());
     conforms(&schemas, "RunStatus", &status).unwrap();
     let mut ws = vec![worker(port, 2, 5)];
     c.wait_decided(4);
-    let history = ask(protocol::keys::history("naofarm", "farm"));
+    let history = ask("naofarm/farm/*/history".to_string());
     let rows = history.as_array().expect("the history is an array");
     assert!(rows.len() >= 4);
     for r in rows {
@@ -772,7 +770,7 @@ fn every_topic_matches_the_readme_field_tables() {
     while let Some((key, encoding, text)) = next(finished) {
         assert_eq!(encoding, zenoh::bytes::Encoding::APPLICATION_JSON, "{key}");
         let v: serde_json::Value = serde_json::from_str(&text).unwrap();
-        let schema = match key.split('/').nth(2) {
+        let schema = match key.split('/').nth(3) {
             Some("params") => "Params",
             Some("trials") => "TrialOutcome",
             Some("results") => "IterationResult",
@@ -903,23 +901,26 @@ fn bad_messages_are_counted_and_change_nothing() {
     // Wait until the coordinator is reachable (its status answers): by then
     // its subscriptions are known to this session and puts are routed.
     let deadline = Instant::now() + TIMEOUT;
-    loop {
+    let id = loop {
         let replies = session
-            .get(protocol::keys::status("naofarm", "farm"))
+            .get("naofarm/farm/*/status")
             .timeout(Duration::from_secs(2))
             .wait()
             .unwrap();
-        if replies.recv().is_ok() {
-            break;
+        if let Ok(r) = replies.recv() {
+            let s = r.result().expect("a status");
+            let v: serde_json::Value =
+                serde_json::from_slice(&s.payload().to_bytes()).expect("JSON status");
+            break v["id"].as_str().expect("the run id").to_string();
         }
         assert!(
             Instant::now() < deadline,
             "coordinator never answered its status query"
         );
-    }
-    let key = protocol::keys::outcomes("naofarm");
+    };
+    let key = protocol::keys::FleetKeys::new("naofarm", &id).outcomes();
     let good = TrialOutcome {
-        run: "farm".into(),
+        run: id.clone(),
         iteration: 1,
         trial: 0,
         seed: 0,

@@ -89,7 +89,23 @@ pub enum Record {
         /// naofarm version that extended it.
         version: String,
     },
+    /// The run's identity: a UUID given when its directory was created (or
+    /// when a journal older than run ids was first resumed). Every key and
+    /// message of the run carries it; the experiment's name is a label.
+    Identity {
+        /// The run id (a UUID, hyphenated).
+        id: String,
+    },
+    /// A control action taken while the run was served (kept across resumes).
+    Control {
+        /// What was done.
+        action: Control,
+        /// Who asked (a free-text label: user and host of `naofarm ctl`, or `--priority`).
+        by: String,
+    },
 }
+
+pub use protocol::wire::Control;
 
 /// Journal failures.
 #[derive(Debug, thiserror::Error)]

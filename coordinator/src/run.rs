@@ -18,7 +18,7 @@ use crate::{
         Action, Counted, DecidedIteration, Evolve, HistoryPoint, Imported, Incumbent, Measurement,
         OpenedIteration, OutcomeError,
     },
-    journal::{Journal, JournalError, Record, Tail},
+    journal::{Control, Journal, JournalError, Record, Tail},
     lock::{LockError, RunLock},
 };
 
@@ -73,6 +73,12 @@ pub enum RunError {
         /// What differs.
         why: String,
     },
+    /// A control action with bad numbers.
+    #[error("control: {why}")]
+    BadControl {
+        /// What is wrong.
+        why: String,
+    },
     /// The journal's header holds an experiment this build cannot read.
     #[error("{dir}: the journal's experiment does not parse: {why}")]
     BadHeader {
@@ -94,6 +100,9 @@ pub struct Run {
     extended_from: Option<u64>,
     failures: BTreeMap<(u64, u32), Vec<(String, String)>>,
     failure_limit: usize,
+    id: String,
+    priority: u32,
+    paused: bool,
     _lock: RunLock,
 }
 
@@ -241,7 +250,9 @@ impl Run {
             version: env!("CARGO_PKG_VERSION").to_string(),
             imported: imported.clone(),
         };
-        let journal = Journal::create(dir, &header)?;
+        let mut journal = Journal::create(dir, &header)?;
+        let id = uuid::Uuid::new_v4().to_string();
+        journal.append(&Record::Identity { id: id.clone() })?;
         let (ev, actions) = Evolve::start(exp, &imported);
         let mut run = Self {
             ev,
@@ -252,6 +263,9 @@ impl Run {
             extended_from: None,
             failures: BTreeMap::new(),
             failure_limit: DISTINCT_FAILURES,
+            id,
+            priority: 1,
+            paused: false,
             _lock: lock,
         };
         let effects = run.act(actions)?;
@@ -302,6 +316,8 @@ impl Run {
         let mut opened_records = Vec::new();
         let mut decided_records = Vec::new();
         let mut failures: BTreeMap<(u64, u32), Vec<(String, String)>> = BTreeMap::new();
+        let mut id = None;
+        let (mut priority, mut paused) = (1, false);
         for rec in records.into_iter().skip(1) {
             match rec {
                 Record::Header { .. } => {
@@ -312,6 +328,14 @@ impl Run {
                     })
                 }
                 Record::Extended { .. } => {}
+                Record::Identity { id: i } => id = id.or(Some(i)),
+                Record::Control { action, .. } => match action {
+                    Control::Pause => paused = true,
+                    Control::Resume => paused = false,
+                    Control::Priority(p) => priority = p,
+                    // A stopped run that is served again runs.
+                    Control::Stop => {}
+                },
                 Record::Failed {
                     iteration,
                     trial,
@@ -350,7 +374,19 @@ impl Run {
             extended_from: extend.then_some(theirs.iterations),
             failures,
             failure_limit: DISTINCT_FAILURES,
+            id: String::new(),
+            priority,
+            paused,
             _lock: lock,
+        };
+        // A journal older than run ids gets one now, kept from then on.
+        run.id = match id {
+            Some(i) => i,
+            None => {
+                let i = uuid::Uuid::new_v4().to_string();
+                run.journal.append(&Record::Identity { id: i.clone() })?;
+                i
+            }
         };
         for o in opened_records {
             let same = actions
@@ -390,6 +426,49 @@ impl Run {
             effects.push(Effect::Finished);
         }
         Ok((run, effects))
+    }
+
+    /// The run's id (a UUID, journaled when the directory was created).
+    #[must_use]
+    pub fn id(&self) -> &str {
+        &self.id
+    }
+
+    /// The run's priority (journaled; 1 unless changed).
+    #[must_use]
+    pub fn priority(&self) -> u32 {
+        self.priority
+    }
+
+    /// Whether the run is paused (journaled).
+    #[must_use]
+    pub fn paused(&self) -> bool {
+        self.paused
+    }
+
+    /// Journals a control action and applies it (a no-op change is not journaled).
+    pub fn control(&mut self, action: Control, by: &str) -> Result<(), RunError> {
+        action.check().map_err(|why| RunError::BadControl { why })?;
+        let changes = match action {
+            Control::Pause => !self.paused,
+            Control::Resume => self.paused,
+            Control::Priority(p) => p != self.priority,
+            Control::Stop => true,
+        };
+        if !changes {
+            return Ok(());
+        }
+        self.journal.append(&Record::Control {
+            action,
+            by: by.to_string(),
+        })?;
+        match action {
+            Control::Pause => self.paused = true,
+            Control::Resume => self.paused = false,
+            Control::Priority(p) => self.priority = p,
+            Control::Stop => {}
+        }
+        Ok(())
     }
 
     /// Journals what the actions need (one fsync), then returns the effects.
@@ -530,7 +609,7 @@ impl Run {
         k: u32,
         dispatch: u64,
     ) -> Result<TrialRequest, OutcomeError> {
-        request(self.ev.experiment(), opened, k, dispatch)
+        request(self.ev.experiment(), &self.id, opened, k, dispatch)
     }
 
     /// The evolve state machine (read-only).
@@ -555,6 +634,7 @@ impl Run {
 /// The request for trial `k` of an opened iteration: exactly what a worker gets.
 pub fn request(
     exp: &Experiment,
+    run_id: &str,
     opened: &OpenedIteration,
     k: u32,
     dispatch: u64,
@@ -568,7 +648,7 @@ pub fn request(
             trial: k,
         })?;
     Ok(TrialRequest {
-        run: exp.name.clone(),
+        run: run_id.to_string(),
         iteration: opened.iteration,
         trial: k,
         seed,
@@ -601,7 +681,13 @@ pub fn farm_trial(dir: &Path, iteration: u64, trial: u32) -> Result<FarmTrial, R
             _ => None,
         })
         .ok_or(RunError::Refused(OutcomeError::UnknownIteration(iteration)))?;
-    let request = request(&view.experiment, &opened, trial, 0)?;
+    let request = request(
+        &view.experiment,
+        view.id.as_deref().unwrap_or("unnamed"),
+        &opened,
+        trial,
+        0,
+    )?;
     let journaled = records.into_iter().find_map(|r| match r {
         Record::Outcome {
             iteration: i,
@@ -634,6 +720,8 @@ pub struct RunView {
     pub records: usize,
     /// The planned totals the run was extended to, in order.
     pub extensions: Vec<u64>,
+    /// The run id (`None`: a journal older than run ids, never resumed since).
+    pub id: Option<String>,
 }
 
 /// Reads the run in `dir`: damage is an error naming its offset; a torn tail is
@@ -656,10 +744,12 @@ fn read_run_records(dir: &Path) -> Result<(RunView, Vec<Record>), RunError> {
     };
     let mut decided = Vec::new();
     let mut extensions = Vec::new();
+    let mut id = None;
     for rec in &records {
         match rec {
             Record::Decided(d) => decided.push(d.clone()),
             Record::Extended { iterations, .. } => extensions.push(*iterations),
+            Record::Identity { id: i } => id = id.or_else(|| Some(i.clone())),
             _ => {}
         }
     }
@@ -672,6 +762,7 @@ fn read_run_records(dir: &Path) -> Result<(RunView, Vec<Record>), RunError> {
         version,
         records: records.len(),
         extensions,
+        id,
     };
     Ok((view, records))
 }

@@ -3,7 +3,8 @@
 //! (tokio's clock, so tests run it under `tokio::time::pause()`); nothing here
 //! reads a clock, sends a message or touches the journal.
 //!
-//! A trial is queued until a live worker with a free slot takes it; it is
+//! Workers pull: a trial is queued until a worker asking for work takes it
+//! ([`Scheduler::take`], at most the asker's free slots); it is
 //! *in flight* on that worker until the worker answers, its lease passes
 //! ([`Scheduler::tick`]), or the worker goes (token dropped, or silent for
 //! four silence periods). Workers that failed a trial, or let its lease pass,
@@ -215,61 +216,85 @@ impl Scheduler {
         now.saturating_duration_since(w.last_seen) <= self.silence && !self.set_aside.contains(id)
     }
 
-    /// Hands queued trials to live workers with free slots, most free slots
-    /// first (ties: smallest id), each under a new dispatch id from `new_id`. A trial that failed on some workers
-    /// (`failed(t)`) waits for another live worker while one exists. Returns
-    /// the (trial, worker) pairs to send; they are in flight until `now + lease`.
-    pub fn dispatch(
+    /// Worker `id` asks for up to `want` trials: hands it queued trials, at
+    /// most its free slots, each under a new dispatch id from `new_id`. A trial
+    /// that failed on `id` (`failed(t)`), or whose lease passed on it, waits for
+    /// another live worker while one exists, and for one silence period after
+    /// the failure in any case. A set-aside worker gets nothing. The trials are
+    /// in flight on `id` until `now + lease`. The asker counts as heard from.
+    pub fn take(
         &mut self,
+        id: &str,
+        slots: u32,
+        want: u32,
         now: Instant,
         failed: &dyn Fn(TrialId) -> BTreeSet<String>,
         new_id: &mut dyn FnMut() -> u64,
-    ) -> Vec<(TrialId, String, u64)> {
+    ) -> Vec<(TrialId, u64)> {
+        self.worker_seen(id, Some(slots), now);
+        if self.set_aside.contains(id) {
+            return Vec::new();
+        }
+        let free = self.workers.get(id).map_or(0, |w| {
+            u64::from(w.slots).saturating_sub(w.assigned.len() as u64)
+        });
+        let mut room = free.min(u64::from(want));
         let mut out = Vec::new();
         let queued: Vec<TrialId> = self.queue.iter().copied().collect();
         for t in queued {
-            let free = |s: &Self, id: &str, w: &WorkerInfo| {
-                s.usable(id, w, now) && (w.assigned.len() as u64) < u64::from(w.slots)
-            };
-            if !self.workers.iter().any(|(id, w)| free(self, id, w)) {
+            if room == 0 {
                 break;
             }
             let mut failed = failed(t);
             failed.extend(self.expired_on.get(&t).into_iter().flatten().cloned());
-            let fresh_exists = self
-                .workers
-                .iter()
-                .any(|(id, w)| self.usable(id, w, now) && !failed.contains(id));
-            let held = self.hold.get(&t).is_some_and(|until| now < *until);
-            let pick = self
-                .workers
-                .iter()
-                .filter(|(id, w)| free(self, id, w))
-                .filter(|(id, _)| !((fresh_exists || held) && failed.contains(*id)))
-                .max_by_key(|(id, w)| {
-                    (
-                        u64::from(w.slots) - w.assigned.len() as u64,
-                        std::cmp::Reverse((*id).clone()),
-                    )
-                })
-                .map(|(id, _)| id.clone());
-            let Some(id) = pick else { continue };
+            if failed.contains(id) {
+                let held = self.hold.get(&t).is_some_and(|until| now < *until);
+                let fresh_exists = self
+                    .workers
+                    .iter()
+                    .any(|(w, info)| self.usable(w, info, now) && !failed.contains(w));
+                if held || fresh_exists {
+                    continue;
+                }
+            }
             self.queue.remove(&t);
-            if let Some(w) = self.workers.get_mut(&id) {
+            if let Some(w) = self.workers.get_mut(id) {
                 w.assigned.insert(t);
             }
             let dispatch = new_id();
             self.inflight.insert(
                 t,
                 Inflight {
-                    worker: id.clone(),
+                    worker: id.to_string(),
                     dispatch,
                     deadline: now + self.lease,
                 },
             );
-            out.push((t, id, dispatch));
+            out.push((t, dispatch));
+            room -= 1;
         }
         out
+    }
+
+    /// Trials queued, ready to hand out.
+    #[must_use]
+    pub fn ready(&self) -> usize {
+        self.queue.len()
+    }
+
+    /// Trials in flight.
+    #[must_use]
+    pub fn in_flight(&self) -> usize {
+        self.inflight.len()
+    }
+
+    /// Workers holding at least one trial.
+    #[must_use]
+    pub fn serving(&self) -> usize {
+        self.workers
+            .values()
+            .filter(|w| !w.assigned.is_empty())
+            .count()
     }
 
     /// Workers known (live or not yet swept).

@@ -1,12 +1,18 @@
-//! The coordinator service: drives a [`Run`] over zenoh.
+//! The coordinator service: drives a [`Run`] over zenoh, as one of many runs
+//! sharing a fleet of workers.
 //!
-//! It hands each trial to one live worker (addressed by id, never by
-//! best-matching), keeps at most `slots` trials on a worker, re-queues a
-//! trial when its worker's liveliness token disappears, when the worker stops
-//! sending heartbeats, or when the trial's lease deadline passes, and counts a
-//! late or duplicate outcome once (the [`Run`] decides). Watched topics
-//! (trials, results, status) carry JSON. Bad messages are logged, counted and
-//! dropped; nothing reaches the journal unless the run accepts it.
+//! Workers pull: a worker asks the run's `work` queryable for trials (at most
+//! its free slots) and gets them in the reply, each under an unguessable
+//! dispatch id; the run advertises its priority and how many trials it has
+//! ready on its `ad` key, and workers share their slots among the runs by
+//! priority (see `docs/fleet.md`). Every fleet key carries the run id, so a
+//! coordinator hears only its own run's outcomes. A trial goes back to the
+//! queue when its worker's liveliness token disappears, when the worker stops
+//! sending heartbeats, or when its lease passes; only the answer to the
+//! dispatch in flight counts, once (the [`Run`] decides). Watched topics
+//! (trials, results, status) carry JSON. Bad messages are logged once per
+//! source, counted per reason and dropped; nothing reaches the journal unless
+//! the run accepts it.
 
 use std::{
     collections::{BTreeMap, HashMap},
@@ -16,8 +22,11 @@ use std::{
 use tokio::time::Instant;
 
 use protocol::{
-    keys,
-    wire::{IterationResult, RunStatus, TrialFailure, TrialOutcome, WireMessage, WorkerPresence},
+    keys::{self, FleetKeys, RunKeys},
+    wire::{
+        Control, ControlRequest, IterationResult, RunAdvert, RunState, RunStatus, TrialFailure,
+        TrialOutcome, WireMessage, WorkGrant, WorkRequest, WorkerPresence,
+    },
 };
 use zenoh::{bytes::Encoding, sample::SampleKind, Session};
 
@@ -77,6 +86,8 @@ pub enum Ended {
     Finished(Counters),
     /// Stopped by the shutdown signal.
     Interrupted(Counters),
+    /// Stopped by `naofarm ctl RUN stop` (journaled; the run can be resumed).
+    Stopped(Counters, String),
 }
 
 /// Progress events for views (the run's own terminal, tests).
@@ -100,6 +111,12 @@ pub enum ServiceError {
     /// A trial could not be run on any worker.
     #[error("{0}")]
     GaveUp(crate::run::GaveUp),
+    /// Another coordinator already serves this run id (a copied run directory?).
+    #[error("run id {id} is already served by another coordinator on this network (a copy of the run directory?); refusing to serve it twice")]
+    AlreadyServed {
+        /// The run id.
+        id: String,
+    },
 }
 
 fn zerr(e: impl std::fmt::Display) -> ServiceError {
@@ -108,7 +125,13 @@ fn zerr(e: impl std::fmt::Display) -> ServiceError {
 
 struct State {
     run: Run,
-    cfg: ServiceConfig,
+    rkeys: RunKeys,
+    fkeys: FleetKeys,
+    /// Sequence number of the last advert; whether it said trials were ready;
+    /// whether a worker got fewer trials than it wanted since (it waits for
+    /// the next advert before asking again).
+    advert: (u64, bool, bool),
+    stopped: Option<String>,
     opened: BTreeMap<u64, OpenedIteration>,
     sched: Scheduler,
     dispatch: u64,
@@ -137,6 +160,9 @@ impl State {
         };
         RunStatus {
             run: exp.name.clone(),
+            id: self.run.id().to_string(),
+            priority: self.run.priority(),
+            state: self.state(),
             planned: exp.iterations,
             opened: ev.opened(),
             decided: ev.decided(),
@@ -149,6 +175,46 @@ impl State {
             trials_per_s: rate,
             finished: ev.finished(),
         }
+    }
+
+    fn state(&self) -> RunState {
+        if self.run.evolve().finished() {
+            RunState::Finished
+        } else if self.stopped.is_some() {
+            RunState::Stopped
+        } else if self.run.paused() {
+            RunState::Paused
+        } else {
+            RunState::Running
+        }
+    }
+
+    fn advert(&mut self) -> RunAdvert {
+        self.advert.0 += 1;
+        let ready = if self.state() == RunState::Running {
+            u32::try_from(self.sched.ready()).unwrap_or(u32::MAX)
+        } else {
+            0
+        };
+        self.advert.1 = ready > 0;
+        self.advert.2 = false;
+        let ev = self.run.evolve();
+        RunAdvert {
+            id: self.run.id().to_string(),
+            name: ev.experiment().name.clone(),
+            priority: self.run.priority(),
+            ready,
+            state: self.state(),
+            duration_s: ev.experiment().trial_duration_s,
+            seq: self.advert.0,
+        }
+    }
+
+    /// Whether workers must hear of a change now: trials became ready, ran
+    /// out, or are ready while a worker that got a short grant waits.
+    fn advert_due(&self) -> bool {
+        let ready = self.state() == RunState::Running && self.sched.ready() > 0;
+        ready != self.advert.1 || (ready && self.advert.2)
     }
 
     fn result_of(&self, d: &DecidedIteration) -> IterationResult {
@@ -232,7 +298,8 @@ impl State {
     }
 }
 
-/// Runs the coordinator until the run finishes or `shutdown` turns true.
+/// Runs the coordinator until the run finishes, `shutdown` turns true, or
+/// `naofarm ctl` stops it.
 pub async fn serve(
     session: Session,
     run: Run,
@@ -243,41 +310,63 @@ pub async fn serve(
 ) -> Result<Ended, ServiceError> {
     let prefix = cfg.prefix.clone();
     let name = run.evolve().experiment().name.clone();
+    let id = run.id().to_string();
+    let rkeys = RunKeys::new(&prefix, &name, &id);
+    let fkeys = FleetKeys::new(&prefix, &id);
+    // A copied run directory must not be served twice: ask for the run's token first.
+    let claimed = session
+        .liveliness()
+        .get(keys::coordinator(&prefix, &id))
+        .timeout(Duration::from_millis(500))
+        .await
+        .map_err(zerr)?;
+    while let Ok(reply) = claimed.recv_async().await {
+        if reply.result().is_ok() {
+            return Err(ServiceError::AlreadyServed { id });
+        }
+    }
     let outcomes = session
-        .declare_subscriber(keys::outcomes(&prefix))
+        .declare_subscriber(fkeys.outcomes())
         .await
         .map_err(zerr)?;
     let failures = session
-        .declare_subscriber(keys::failures(&prefix))
+        .declare_subscriber(fkeys.failures())
         .await
         .map_err(zerr)?;
     let presence = session
-        .declare_subscriber(keys::presence(&prefix))
+        .declare_subscriber(fkeys.presence())
         .await
         .map_err(zerr)?;
     let live = session
         .liveliness()
         .declare_subscriber(keys::workers_all(&prefix))
-        .history(true)
         .await
         .map_err(zerr)?;
+    let work_q = session
+        .declare_queryable(fkeys.work())
+        .await
+        .map_err(zerr)?;
+    let ctl_q = session.declare_queryable(fkeys.ctl()).await.map_err(zerr)?;
     let status_q = session
-        .declare_queryable(keys::status(&prefix, &name))
+        .declare_queryable(rkeys.status())
         .await
         .map_err(zerr)?;
     let history_q = session
-        .declare_queryable(keys::history(&prefix, &name))
+        .declare_queryable(rkeys.history())
         .await
         .map_err(zerr)?;
     let _token = session
         .liveliness()
-        .declare_token(keys::coordinator(&prefix, &name))
+        .declare_token(keys::coordinator(&prefix, &id))
         .await
         .map_err(zerr)?;
     let mut st = State {
         run,
         sched: Scheduler::new(cfg.lease, cfg.silence),
-        cfg,
+        rkeys,
+        fkeys,
+        advert: (0, false, false),
+        stopped: None,
         opened: BTreeMap::new(),
         dispatch: 0,
         counters: Counters::default(),
@@ -303,12 +392,24 @@ pub async fn serve(
         let _ = tx.send(Event::Started(st.history.clone(), Box::new(st.status())));
     }
     handle_effects(&session, &mut st, effects, events.as_ref()).await?;
+    advertise(&session, &mut st).await;
     let mut tick = tokio::time::interval(Duration::from_millis(50));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let mut ad_tick = tokio::time::interval(ADVERT_EVERY);
+    ad_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
         if st.finished {
-            publish(&session, &keys::status(&prefix, &name), &st.status()).await;
+            advertise(&session, &mut st).await;
+            publish(&session, &st.rkeys.status(), &st.status()).await;
             return Ok(Ended::Finished(st.counters));
+        }
+        if let Some(by) = st.stopped.clone() {
+            advertise(&session, &mut st).await;
+            publish(&session, &st.rkeys.status(), &st.status()).await;
+            return Ok(Ended::Stopped(st.counters, by));
+        }
+        if st.advert_due() {
+            advertise(&session, &mut st).await;
         }
         tokio::select! {
             s = outcomes.recv_async() => {
@@ -316,24 +417,14 @@ pub async fn serve(
                 let bytes = s.payload().to_bytes();
                 match TrialOutcome::decode(&bytes) {
                     Err(e) => st.refuse("an undecodable message", &format!("outcome: {e}")),
-                    Ok(o) if o.run != name => st.refuse(&o.worker, "outcome for another run"),
+                    Ok(o) if o.run != id => st.refuse(&o.worker, "outcome for another run"),
                     Ok(o) => on_outcome(&session, &mut st, o, events.as_ref()).await?,
                 }
             }
             s = failures.recv_async() => {
                 let s = s.map_err(zerr)?;
                 match TrialFailure::decode(&s.payload().to_bytes()) {
-                    Ok(f) if f.run == name => {
-                        let t = (f.iteration, f.trial);
-                        match st.sched.answered(t, &f.worker, f.dispatch, Instant::now()) {
-                            Answer::Held => {
-                                tracing::warn!(worker = %f.worker, iteration = f.iteration, trial = f.trial, reason = %f.reason, "a worker could not run a trial");
-                                st.failed(t, &f.worker, &f.reason)?;
-                                dispatch(&session, &mut st).await;
-                            }
-                            other => st.refuse(&f.worker, &format!("failure report: {}", other.reason())),
-                        }
-                    }
+                    Ok(f) if f.run == id => on_failure(&mut st, &f)?,
                     Ok(f) => st.refuse(&f.worker, "failure report for another run"),
                     Err(e) => st.refuse("an undecodable message", &format!("failure report: {e}")),
                 }
@@ -347,13 +438,18 @@ pub async fn serve(
             }
             s = live.recv_async() => {
                 let s = s.map_err(zerr)?;
-                let id = keys::last_chunk(s.key_expr().as_str()).to_string();
                 if s.kind() == SampleKind::Delete {
-                    st.requeue_worker(&id)?;
-                } else {
-                    // Slots arrive with the first heartbeat; until then one.
-                    st.sched.worker_seen(&id, None, Instant::now());
+                    let wid = keys::last_chunk(s.key_expr().as_str()).to_string();
+                    st.requeue_worker(&wid)?;
                 }
+            }
+            q = work_q.recv_async() => {
+                let q = q.map_err(zerr)?;
+                on_work(&mut st, &q).await;
+            }
+            q = ctl_q.recv_async() => {
+                let q = q.map_err(zerr)?;
+                on_ctl(&mut st, &q).await?;
             }
             q = status_q.recv_async() => {
                 let q = q.map_err(zerr)?;
@@ -367,23 +463,173 @@ pub async fn serve(
                 let t = st.sched.tick(Instant::now());
                 for (trial, worker) in t.expired {
                     if st.run.is_pending(trial.0, trial.1) {
-                        tracing::info!(iteration = trial.0, trial = trial.1, %worker, "lease expired; re-dispatching");
+                        tracing::info!(iteration = trial.0, trial = trial.1, %worker, "lease expired; the trial is offered again");
                         st.sched.enqueue(trial);
                         st.counters.redispatched += 1;
                     }
                 }
-                for id in t.silent {
+                for wid in t.silent {
                     // Far past its heartbeat: treat as gone even if its token lingers.
-                    st.requeue_worker(&id)?;
+                    st.requeue_worker(&wid)?;
                 }
-                dispatch(&session, &mut st).await;
             }
+            _ = ad_tick.tick() => advertise(&session, &mut st).await,
             _ = shutdown.changed() => {
                 if *shutdown.borrow() {
                     return Ok(Ended::Interrupted(st.counters));
                 }
             }
         }
+    }
+}
+
+/// How often a run repeats its advert (workers forget a run not heard for three of these).
+pub const ADVERT_EVERY: Duration = Duration::from_millis(500);
+
+/// Publishes the run's advert (workers choose runs by it).
+async fn advertise(session: &Session, st: &mut State) {
+    let ad = st.advert();
+    match ad.encode() {
+        Ok(bytes) => {
+            if let Err(e) = session.put(st.fkeys.advert(), bytes).await {
+                tracing::warn!(error = %e, "advert not published");
+            }
+        }
+        Err(e) => tracing::error!(error = %e, "advert not encoded"),
+    }
+}
+
+/// A worker reported a trial it could not (or would not) run.
+fn on_failure(st: &mut State, f: &TrialFailure) -> Result<(), ServiceError> {
+    let t = (f.iteration, f.trial);
+    match st.sched.answered(t, &f.worker, f.dispatch, Instant::now()) {
+        Answer::Held if f.refused => {
+            // Beyond its limits, or it is stopping: not the trial's failure.
+            tracing::info!(worker = %f.worker, iteration = f.iteration, trial = f.trial, reason = %f.reason, "a worker gave a trial back");
+            st.counters.redispatched += 1;
+            st.sched.enqueue(t);
+        }
+        Answer::Held => {
+            tracing::warn!(worker = %f.worker, iteration = f.iteration, trial = f.trial, reason = %f.reason, "a worker could not run a trial");
+            st.failed(t, &f.worker, &f.reason)?;
+        }
+        other => st.refuse(&f.worker, &format!("failure report: {}", other.reason())),
+    }
+    Ok(())
+}
+
+/// A worker asks for trials: grant up to its free slots, in one reply that only it receives.
+async fn on_work(st: &mut State, q: &zenoh::query::Query) {
+    let Some(payload) = q.payload() else {
+        st.refuse("a query without payload", "work request: empty");
+        reply_err(q, "a work request needs a WorkRequest payload").await;
+        return;
+    };
+    let req = match WorkRequest::decode(&payload.to_bytes()) {
+        Ok(r) => r,
+        Err(e) => {
+            st.refuse("an undecodable message", &format!("work request: {e}"));
+            reply_err(q, &e.to_string()).await;
+            return;
+        }
+    };
+    let state = st.state();
+    let exp = st.run.evolve().experiment();
+    let mut note = None;
+    let mut trials = Vec::new();
+    if state != RunState::Running {
+        note = Some(format!("the run is {state:?}").to_lowercase());
+    } else if exp.trial_duration_s > req.max_duration_s {
+        note = Some(format!(
+            "this run's trials last {} s, beyond the worker's limit of {} s",
+            exp.trial_duration_s, req.max_duration_s
+        ));
+        st.sched
+            .worker_seen(&req.worker, Some(req.slots), Instant::now());
+    } else {
+        let run = &st.run;
+        let mut rng = rand::rng();
+        let taken = st.sched.take(
+            &req.worker,
+            req.slots,
+            req.want,
+            Instant::now(),
+            &|t| run.failed_workers(t.0, t.1),
+            &mut || rand::Rng::random::<u64>(&mut rng),
+        );
+        for (t, dispatch_id) in taken {
+            let built = st
+                .opened
+                .get(&t.0)
+                .ok_or_else(|| "its iteration is not open".to_string())
+                .and_then(|o| {
+                    st.run
+                        .request(o, t.1, dispatch_id)
+                        .map_err(|e| e.to_string())
+                });
+            match built {
+                Ok(r) => {
+                    st.dispatch += 1;
+                    trials.push(r);
+                }
+                Err(e) => {
+                    tracing::error!(iteration = t.0, trial = t.1, error = %e, "a queued trial has no request; dropped");
+                    st.sched.forget(t);
+                }
+            }
+        }
+    }
+    if trials.len() < req.want as usize || st.sched.ready() == 0 {
+        // The worker now believes nothing is ready here: tell it when something is.
+        st.advert.2 = true;
+    }
+    let grant = WorkGrant {
+        trials,
+        ready: u32::try_from(st.sched.ready()).unwrap_or(u32::MAX),
+        state,
+        note,
+    };
+    match grant.encode() {
+        Ok(bytes) => {
+            if let Err(e) = q.reply(q.key_expr().clone(), bytes).await {
+                // The worker does not get them: their leases bring them back.
+                tracing::warn!(worker = %req.worker, error = %e, "a work grant was not sent");
+            }
+        }
+        Err(e) => tracing::error!(error = %e, "a work grant cannot be encoded"),
+    }
+}
+
+/// `naofarm ctl`: pause, resume, stop, priority; journaled, then answered with the status.
+async fn on_ctl(st: &mut State, q: &zenoh::query::Query) -> Result<(), ServiceError> {
+    let Some(payload) = q.payload() else {
+        reply_err(q, "a control request needs a ControlRequest payload").await;
+        return Ok(());
+    };
+    let req = match ControlRequest::decode(&payload.to_bytes()) {
+        Ok(r) => r,
+        Err(e) => {
+            st.refuse("an undecodable message", &format!("control: {e}"));
+            reply_err(q, &e.to_string()).await;
+            return Ok(());
+        }
+    };
+    if st.run.evolve().finished() {
+        reply_err(q, "the run is finished").await;
+        return Ok(());
+    }
+    st.run.control(req.action, &req.by)?;
+    tracing::info!(action = ?req.action, by = %req.by, "control");
+    if req.action == Control::Stop {
+        st.stopped = Some(req.by.clone());
+    }
+    reply_json(q, st.status().to_json().map_err(|e| e.to_string())).await;
+    Ok(())
+}
+
+async fn reply_err(q: &zenoh::query::Query, why: &str) {
+    if let Err(e) = q.reply_err(why.to_string()).await {
+        tracing::warn!(error = %e, "an error reply failed");
     }
 }
 
@@ -493,13 +739,7 @@ async fn on_outcome(
             st.counters.accepted += 1;
             st.trials_done += 1;
             st.sched.forget(t);
-            let prefix = st.cfg.prefix.clone();
-            publish(
-                session,
-                &keys::trial(&prefix, &o.run, o.iteration, o.trial),
-                &o,
-            )
-            .await;
+            publish(session, &st.rkeys.trial(o.iteration, o.trial), &o).await;
             handle_effects(session, st, effects, events).await?;
         }
         Err(RunError::Refused(e)) => {
@@ -521,8 +761,8 @@ async fn handle_effects(
     effects: Vec<Effect>,
     events: Option<&tokio::sync::mpsc::UnboundedSender<Event>>,
 ) -> Result<(), ServiceError> {
-    let prefix = st.cfg.prefix.clone();
     let name = st.run.evolve().experiment().name.clone();
+    let id = st.run.id().to_string();
     for e in effects {
         match e {
             Effect::Dispatch(o, ks) => {
@@ -532,25 +772,21 @@ async fn handle_effects(
                 let ev = st.run.evolve();
                 let json = serde_json::json!({
                     "run": name,
+                    "id": id,
                     "iteration": o.iteration,
                     "params": ev.named(&o.params),
                     "trials": o.seeds.len(),
                     "expert": o.expert,
                 });
-                put_json(
-                    session,
-                    &keys::params(&prefix, &name, o.iteration),
-                    json.to_string(),
-                )
-                .await;
+                put_json(session, &st.rkeys.params(o.iteration), json.to_string()).await;
                 st.opened.insert(o.iteration, o);
             }
             Effect::Decided(d) => {
                 st.opened.remove(&d.iteration);
                 let r = st.result_of(&d);
-                publish(session, &keys::results(&prefix, &name, d.iteration), &r).await;
+                publish(session, &st.rkeys.results(d.iteration), &r).await;
                 let status = st.status();
-                publish(session, &keys::status(&prefix, &name), &status).await;
+                publish(session, &st.rkeys.status(), &status).await;
                 st.history.push(r.clone());
                 if let Some(tx) = events {
                     let _ = tx.send(Event::Decided(Box::new(r), Box::new(status)));
@@ -559,45 +795,7 @@ async fn handle_effects(
             Effect::Finished => st.finished = true,
         }
     }
-    dispatch(session, st).await;
     Ok(())
-}
-
-async fn dispatch(session: &Session, st: &mut State) {
-    let run = &st.run;
-    // Dispatch ids are unguessable: an answer must echo the one it was sent.
-    let mut rng = rand::rng();
-    let sends = st.sched.dispatch(
-        Instant::now(),
-        &|t| run.failed_workers(t.0, t.1),
-        &mut || rand::Rng::random::<u64>(&mut rng),
-    );
-    for (t, id, dispatch_id) in sends {
-        let Some(opened) = st.opened.get(&t.0) else {
-            st.sched.forget(t);
-            continue;
-        };
-        st.dispatch += 1;
-        let req = match st.run.request(opened, t.1, dispatch_id) {
-            Ok(r) => r,
-            Err(e) => {
-                tracing::error!(error = %e, "a queued trial has no request; dropped");
-                st.sched.forget(t);
-                continue;
-            }
-        };
-        let bytes = match req.encode() {
-            Ok(b) => b,
-            Err(e) => {
-                tracing::error!(error = %e, "a trial request cannot be encoded; dropped");
-                st.sched.forget(t);
-                continue;
-            }
-        };
-        if let Err(e) = session.put(keys::work(&st.cfg.prefix, &id), bytes).await {
-            tracing::warn!(worker = %id, error = %e, "dispatch failed");
-        }
-    }
 }
 
 /// CPU time (user + system) this process has used, from `/proc/self/stat`

@@ -2,6 +2,8 @@
 //!
 //! The prefix is configurable (default [`DEFAULT_PREFIX`]); run names are
 //! checked by [`check_chunk`] so they can never inject `/`, `*` or `$`.
+//! A run's watched keys ([`RunKeys`]) carry its name and its id; the keys
+//! workers and `naofarm ctl` use ([`FleetKeys`]) carry only its id.
 
 /// The default first chunk of every key.
 pub const DEFAULT_PREFIX: &str = "naofarm";
@@ -28,52 +30,129 @@ pub fn check_chunk(what: &str, s: &str) -> Result<(), String> {
     Ok(())
 }
 
-/// `<prefix>/<run>/params/<iter>`: an iteration's parameter set.
-#[must_use]
-pub fn params(prefix: &str, run: &str, iter: u64) -> String {
-    format!("{prefix}/{run}/params/{iter}")
+/// The watched keys of one run: `<prefix>/<name>/<id>/…`. The name (the
+/// experiment's, a label) comes first so that `<prefix>/<name>/*/…` follows
+/// every run of that name; the id (a UUID) tells two runs of one name apart.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RunKeys {
+    base: String,
 }
 
-/// `<prefix>/<run>/trials/<iter>/<k>`: one trial's outcome.
-#[must_use]
-pub fn trial(prefix: &str, run: &str, iter: u64, k: u32) -> String {
-    format!("{prefix}/{run}/trials/{iter}/{k}")
+impl RunKeys {
+    /// The keys of run `id` named `name` (both checked by [`check_chunk`] beforehand).
+    #[must_use]
+    pub fn new(prefix: &str, name: &str, id: &str) -> Self {
+        Self {
+            base: format!("{prefix}/{name}/{id}"),
+        }
+    }
+
+    /// `…/params/<iter>`: an iteration's parameter set.
+    #[must_use]
+    pub fn params(&self, iter: u64) -> String {
+        format!("{}/params/{iter}", self.base)
+    }
+
+    /// `…/trials/<iter>/<k>`: one trial's outcome.
+    #[must_use]
+    pub fn trial(&self, iter: u64, k: u32) -> String {
+        format!("{}/trials/{iter}/{k}", self.base)
+    }
+
+    /// `…/trials/**`: every trial outcome of the run.
+    #[must_use]
+    pub fn trials_all(&self) -> String {
+        format!("{}/trials/**", self.base)
+    }
+
+    /// `…/results/<iter>`: an iteration's decision.
+    #[must_use]
+    pub fn results(&self, iter: u64) -> String {
+        format!("{}/results/{iter}", self.base)
+    }
+
+    /// `…/results/*`: every result of the run.
+    #[must_use]
+    pub fn results_all(&self) -> String {
+        format!("{}/results/*", self.base)
+    }
+
+    /// `…/status`: the run's state (queryable and published).
+    #[must_use]
+    pub fn status(&self) -> String {
+        format!("{}/status", self.base)
+    }
+
+    /// `…/history`: the decided iterations (queryable).
+    #[must_use]
+    pub fn history(&self) -> String {
+        format!("{}/history", self.base)
+    }
 }
 
-/// `<prefix>/<run>/trials/**`: every trial outcome of a run.
-#[must_use]
-pub fn trials_all(prefix: &str, run: &str) -> String {
-    format!("{prefix}/{run}/trials/**")
-}
-
-/// `<prefix>/<run>/results/<iter>`: an iteration's decision.
-#[must_use]
-pub fn results(prefix: &str, run: &str, iter: u64) -> String {
-    format!("{prefix}/{run}/results/{iter}")
-}
-
-/// `<prefix>/<run>/results/*`: every result of a run.
-#[must_use]
-pub fn results_all(prefix: &str, run: &str) -> String {
-    format!("{prefix}/{run}/results/*")
-}
-
-/// `<prefix>/<run>/status`: the run's state (queryable and published).
-#[must_use]
-pub fn status(prefix: &str, run: &str) -> String {
-    format!("{prefix}/{run}/status")
-}
-
-/// `<prefix>/*/status`: the status of every run.
+/// `<prefix>/*/*/status`: the status of every run.
 #[must_use]
 pub fn status_all(prefix: &str) -> String {
-    format!("{prefix}/*/status")
+    format!("{prefix}/*/*/status")
 }
 
-/// `<prefix>/<run>/history`: the decided iterations (queryable).
+/// The fleet's keys of one run, `<prefix>/@runs/<id>/…`: what workers and
+/// `naofarm ctl` talk to. Only the run's coordinator subscribes to them.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FleetKeys {
+    base: String,
+}
+
+impl FleetKeys {
+    /// The fleet keys of run `id`.
+    #[must_use]
+    pub fn new(prefix: &str, id: &str) -> Self {
+        Self {
+            base: format!("{prefix}/@runs/{id}"),
+        }
+    }
+
+    /// `…/work`: the coordinator's queryable; a worker asks it for trials.
+    #[must_use]
+    pub fn work(&self) -> String {
+        format!("{}/work", self.base)
+    }
+
+    /// `…/outcomes`: workers put this run's trial outcomes here.
+    #[must_use]
+    pub fn outcomes(&self) -> String {
+        format!("{}/outcomes", self.base)
+    }
+
+    /// `…/failures`: workers report this run's trials they could not (or would not) run.
+    #[must_use]
+    pub fn failures(&self) -> String {
+        format!("{}/failures", self.base)
+    }
+
+    /// `…/presence`: heartbeats of workers holding this run's trials.
+    #[must_use]
+    pub fn presence(&self) -> String {
+        format!("{}/presence", self.base)
+    }
+
+    /// `…/ad`: the run's advert (priority, trials ready, state), for workers.
+    #[must_use]
+    pub fn advert(&self) -> String {
+        format!("{}/ad", self.base)
+    }
+
+    /// `…/ctl`: the coordinator's queryable for `naofarm ctl`.
+    #[must_use]
+    pub fn ctl(&self) -> String {
+        format!("{}/ctl", self.base)
+    }
+}
+
+/// `<prefix>/@runs/*/ad`: every run's advert.
 #[must_use]
-pub fn history(prefix: &str, run: &str) -> String {
-    format!("{prefix}/{run}/history")
+pub fn adverts_all(prefix: &str) -> String {
+    format!("{prefix}/@runs/*/ad")
 }
 
 /// `<prefix>/@workers/<worker-id>`: a worker's liveliness token.
@@ -88,35 +167,12 @@ pub fn workers_all(prefix: &str) -> String {
     format!("{prefix}/@workers/*")
 }
 
-/// `<prefix>/@work/<worker-id>`: trial requests addressed to one worker.
+/// `<prefix>/@coordinators/<id>`: the liveliness token of a run's
+/// coordinator (watchers notice a coordinator that stopped; a second
+/// coordinator claiming the same run id is refused).
 #[must_use]
-pub fn work(prefix: &str, worker_id: &str) -> String {
-    format!("{prefix}/@work/{worker_id}")
-}
-
-/// `<prefix>/@presence`: workers announce themselves and their free slots here.
-#[must_use]
-pub fn presence(prefix: &str) -> String {
-    format!("{prefix}/@presence")
-}
-
-/// `<prefix>/@outcomes`: workers publish trial outcomes here for the coordinator.
-#[must_use]
-pub fn outcomes(prefix: &str) -> String {
-    format!("{prefix}/@outcomes")
-}
-
-/// `<prefix>/@failures`: workers report trials they could not run here.
-#[must_use]
-pub fn failures(prefix: &str) -> String {
-    format!("{prefix}/@failures")
-}
-
-/// `<prefix>/@coordinators/<run>`: the liveliness token of a run's coordinator
-/// (watchers notice a coordinator that stopped).
-#[must_use]
-pub fn coordinator(prefix: &str, run: &str) -> String {
-    format!("{prefix}/@coordinators/{run}")
+pub fn coordinator(prefix: &str, id: &str) -> String {
+    format!("{prefix}/@coordinators/{id}")
 }
 
 /// Extracts the last chunk of a key (a worker id from a liveliness key).
@@ -131,9 +187,15 @@ mod tests {
 
     #[test]
     fn keys_have_the_documented_shape() {
-        assert_eq!(trial("naofarm", "r1", 3, 7), "naofarm/r1/trials/3/7");
-        assert_eq!(results("naofarm", "r1", 3), "naofarm/r1/results/3");
-        assert_eq!(status("naofarm", "r1"), "naofarm/r1/status");
+        let k = RunKeys::new("naofarm", "r1", "u-1");
+        assert_eq!(k.trial(3, 7), "naofarm/r1/u-1/trials/3/7");
+        assert_eq!(k.results(3), "naofarm/r1/u-1/results/3");
+        assert_eq!(k.status(), "naofarm/r1/u-1/status");
+        assert_eq!(status_all("naofarm"), "naofarm/*/*/status");
+        let f = FleetKeys::new("naofarm", "u-1");
+        assert_eq!(f.work(), "naofarm/@runs/u-1/work");
+        assert_eq!(f.outcomes(), "naofarm/@runs/u-1/outcomes");
+        assert_eq!(adverts_all("naofarm"), "naofarm/@runs/*/ad");
         assert_eq!(worker("naofarm", "abc"), "naofarm/@workers/abc");
         assert_eq!(last_chunk("naofarm/@workers/abc"), "abc");
     }

@@ -15,7 +15,7 @@ use crate::{
 };
 
 /// Version of the envelope and message layout.
-pub const WIRE_VERSION: u8 = 1;
+pub const WIRE_VERSION: u8 = 2;
 /// Largest message accepted, in bytes (checked before any allocation).
 pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
 const MAGIC: [u8; 2] = *b"NF";
@@ -225,7 +225,7 @@ fn param_list(field: &'static str, ps: &[(String, f64)]) -> Check {
 /// A request to run one trial: everything a stateless worker needs.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TrialRequest {
-    /// Run name.
+    /// Run id (a UUID: the run's identity; its name is only a label).
     pub run: String,
     /// CLOP iteration index i.
     pub iteration: u64,
@@ -346,7 +346,7 @@ impl WireMessage for TrialOutcome {
 /// A trial a worker could not run: an error, a panic, or a non-finite result.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TrialFailure {
-    /// Run name.
+    /// Run id.
     pub run: String,
     /// CLOP iteration index i.
     pub iteration: u64,
@@ -360,6 +360,9 @@ pub struct TrialFailure {
     pub worker: String,
     /// What went wrong (error text, panic message, the non-finite value).
     pub reason: String,
+    /// The worker would not run it (beyond its limits): not a failure of the
+    /// trial; the coordinator offers it to other workers.
+    pub refused: bool,
 }
 
 impl WireMessage for TrialFailure {
@@ -482,6 +485,174 @@ impl WireMessage for IterationResult {
     }
 }
 
+/// Where a run stands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RunState {
+    /// Trials are handed out.
+    Running,
+    /// No trials are handed out (`naofarm ctl RUN pause`).
+    Paused,
+    /// The coordinator is stopping (`naofarm ctl RUN stop`).
+    Stopped,
+    /// Every planned iteration is decided.
+    Finished,
+}
+
+/// A run's advert on `<prefix>/@runs/<id>/ad`: what a worker needs to choose
+/// which run to ask for work. Published when it changes and every heartbeat.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunAdvert {
+    /// Run id.
+    pub id: String,
+    /// Run name (a label).
+    pub name: String,
+    /// Priority 1..=1000.
+    pub priority: u32,
+    /// Trials queued and ready to hand out.
+    pub ready: u32,
+    /// Where the run stands.
+    pub state: RunState,
+    /// Longest trial of the run, simulated seconds (a worker beyond its limit does not ask).
+    pub duration_s: f64,
+    /// Increases with every advert of this coordinator (older ones are ignored).
+    pub seq: u64,
+}
+
+impl WireMessage for RunAdvert {
+    const NAME: &'static str = "RunAdvert";
+    const KIND: u8 = 7;
+    fn validate(&self) -> Check {
+        chunk("id", &self.id)?;
+        chunk("name", &self.name)?;
+        Control::Priority(self.priority)
+            .check()
+            .map_err(|m| ("priority", m))?;
+        finite("duration_s", self.duration_s)
+    }
+}
+
+/// A worker asking a run for trials (the payload of a query on `<prefix>/@runs/<id>/work`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WorkRequest {
+    /// Worker id (a UUID).
+    pub worker: String,
+    /// Trials wanted now (at most its free slots).
+    pub want: u32,
+    /// Slots of the worker.
+    pub slots: u32,
+    /// Trials it runs now (for all runs).
+    pub busy: u32,
+    /// Longest trial it accepts, simulated seconds.
+    pub max_duration_s: f64,
+    /// naofarm version of the worker.
+    pub version: String,
+}
+
+impl WireMessage for WorkRequest {
+    const NAME: &'static str = "WorkRequest";
+    const KIND: u8 = 8;
+    fn validate(&self) -> Check {
+        chunk("worker", &self.worker)?;
+        if self.slots == 0 || self.slots > 4096 {
+            return Err(("slots", format!("{} is not in 1..=4096", self.slots)));
+        }
+        if self.want == 0 || self.want > self.slots {
+            return Err((
+                "want",
+                format!("{} is not in 1..={}", self.want, self.slots),
+            ));
+        }
+        if self.busy > self.slots {
+            return Err(("busy", "more busy slots than slots".into()));
+        }
+        finite("max_duration_s", self.max_duration_s)?;
+        if self.version.len() > 64 {
+            return Err(("version", "longer than 64 bytes".into()));
+        }
+        Ok(())
+    }
+}
+
+/// A run's answer to a [`WorkRequest`]: the trials granted (possibly none) and why not more.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WorkGrant {
+    /// The trials now in flight on the asking worker.
+    pub trials: Vec<TrialRequest>,
+    /// Trials still ready after this grant.
+    pub ready: u32,
+    /// Where the run stands.
+    pub state: RunState,
+    /// Why fewer trials than wanted, when it is not just an empty queue.
+    pub note: Option<String>,
+}
+
+impl WireMessage for WorkGrant {
+    const NAME: &'static str = "WorkGrant";
+    const KIND: u8 = 9;
+    fn validate(&self) -> Check {
+        if self.trials.len() > 4096 {
+            return Err(("trials", "more than 4096".into()));
+        }
+        for t in &self.trials {
+            t.validate()?;
+        }
+        if self.note.as_ref().is_some_and(|n| n.len() > 4096) {
+            return Err(("note", "longer than 4096 bytes".into()));
+        }
+        Ok(())
+    }
+}
+
+/// A `naofarm ctl` request (the payload of a query on `<prefix>/@runs/<id>/ctl`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ControlRequest {
+    /// What to do.
+    pub action: Control,
+    /// Who asks (user@host), journaled with the action.
+    pub by: String,
+}
+
+impl WireMessage for ControlRequest {
+    const NAME: &'static str = "ControlRequest";
+    const KIND: u8 = 10;
+    fn validate(&self) -> Check {
+        self.action.check().map_err(|m| ("action", m))?;
+        if self.by.len() > 256 {
+            return Err(("by", "longer than 256 bytes".into()));
+        }
+        Ok(())
+    }
+}
+
+/// What `naofarm ctl` (or `--priority`) can do to a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Control {
+    /// Hand out no more trials (those in flight finish).
+    Pause,
+    /// Hand out trials again.
+    Resume,
+    /// The run's priority (1..=1000): its share of a shared fleet follows it.
+    Priority(u32),
+    /// The coordinator stops (the run can be resumed later).
+    Stop,
+}
+
+/// The highest priority a run can have.
+pub const MAX_PRIORITY: u32 = 1000;
+
+impl Control {
+    /// Checks the action's numbers.
+    pub fn check(self) -> Result<(), String> {
+        match self {
+            Self::Priority(p) if p == 0 || p > MAX_PRIORITY => {
+                Err(format!("priority {p} is not in 1..={MAX_PRIORITY}"))
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
 /// A worker's announcement: who it is and how many trials it can take.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct WorkerPresence {
@@ -516,8 +687,14 @@ impl WireMessage for WorkerPresence {
 /// A run's state, for late joiners and watchers.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RunStatus {
-    /// Run name.
+    /// Run name (the experiment's; a label).
     pub run: String,
+    /// Run id (a UUID, given when the run's directory was created).
+    pub id: String,
+    /// The run's priority: its share of a shared fleet.
+    pub priority: u32,
+    /// Running, paused, stopped or finished.
+    pub state: RunState,
     /// Iterations planned.
     pub planned: u64,
     /// Iterations opened so far (the current iteration is `opened - 1`).
@@ -547,6 +724,10 @@ impl WireMessage for RunStatus {
     const KIND: u8 = 5;
     fn validate(&self) -> Check {
         chunk("run", &self.run)?;
+        chunk("id", &self.id)?;
+        Control::Priority(self.priority)
+            .check()
+            .map_err(|m| ("priority", m))?;
         if self.decided > self.opened {
             return Err(("decided", "more decided than opened".into()));
         }
@@ -627,7 +808,7 @@ mod tests {
         fn presence_and_status_round_trip(w in run(), slots in 1u32..64, a in 0u64..100, e in 0u64..100, r in 0u64..100, ps in params()) {
             let p = WorkerPresence { worker: w.clone(), slots, busy: slots / 2, version: "0.1.0".into() };
             prop_assert_eq!(WorkerPresence::decode(&p.encode().unwrap()), Ok(p));
-            let s = RunStatus { run: w, planned: 500, opened: a + e + r + 2, decided: a + e + r, accepts: a,
+            let s = RunStatus { run: w.clone(), id: format!("{w}-id"), priority: 2, state: RunState::Running, planned: 500, opened: a + e + r + 2, decided: a + e + r, accepts: a,
                                 equivalents: e, rejects: r, best: None, optim2: ps, workers: 3, trials_per_s: 1.5, finished: false };
             prop_assert_eq!(RunStatus::decode(&s.encode().unwrap()), Ok(s.clone()));
             prop_assert_eq!(RunStatus::from_json(&s.to_json().unwrap()), Ok(s));
@@ -640,10 +821,24 @@ mod tests {
             let _ = IterationResult::decode(&bytes);
             let _ = WorkerPresence::decode(&bytes);
             let _ = RunStatus::decode(&bytes);
+            let _ = RunAdvert::decode(&bytes);
+            let _ = WorkRequest::decode(&bytes);
+            let _ = WorkGrant::decode(&bytes);
+            let _ = ControlRequest::decode(&bytes);
         }
 
         #[test]
-        fn arbitrary_bodies_behind_a_valid_header_never_panic(kind in 1u8..6, body in proptest::collection::vec(any::<u8>(), 0..256)) {
+        fn fleet_messages_round_trip(w in run(), slots in 1u32..64, p in 1u32..1000, ready in any::<u32>(), seq in any::<u64>()) {
+            let ad = RunAdvert { id: format!("{w}-id"), name: w.clone(), priority: p, ready, state: RunState::Paused, duration_s: 10.0, seq };
+            prop_assert_eq!(RunAdvert::decode(&ad.encode().unwrap()), Ok(ad));
+            let rq = WorkRequest { worker: w.clone(), want: slots, slots, busy: 0, max_duration_s: 60.0, version: "x".into() };
+            prop_assert_eq!(WorkRequest::decode(&rq.encode().unwrap()), Ok(rq));
+            let c = ControlRequest { action: Control::Priority(p), by: w };
+            prop_assert_eq!(ControlRequest::decode(&c.encode().unwrap()), Ok(c));
+        }
+
+        #[test]
+        fn arbitrary_bodies_behind_a_valid_header_never_panic(kind in 1u8..11, body in proptest::collection::vec(any::<u8>(), 0..256)) {
             let mut bytes = vec![b'N', b'F', WIRE_VERSION, kind];
             bytes.extend(body);
             let _ = TrialRequest::decode(&bytes);
@@ -651,7 +846,48 @@ mod tests {
             let _ = IterationResult::decode(&bytes);
             let _ = WorkerPresence::decode(&bytes);
             let _ = RunStatus::decode(&bytes);
+            let _ = RunAdvert::decode(&bytes);
+            let _ = WorkRequest::decode(&bytes);
+            let _ = WorkGrant::decode(&bytes);
+            let _ = ControlRequest::decode(&bytes);
         }
+    }
+
+    #[test]
+    fn fleet_messages_refuse_absurd_numbers() {
+        let rq = WorkRequest {
+            worker: "w".into(),
+            want: 5,
+            slots: 4,
+            busy: 0,
+            max_duration_s: 60.0,
+            version: "x".into(),
+        };
+        assert!(matches!(
+            WorkRequest::decode(&rq.encode().unwrap()),
+            Err(DecodeError::Field { field: "want", .. })
+        ));
+        let c = ControlRequest {
+            action: Control::Priority(0),
+            by: "me".into(),
+        };
+        assert!(matches!(
+            ControlRequest::decode(&c.encode().unwrap()),
+            Err(DecodeError::Field {
+                field: "action",
+                ..
+            })
+        ));
+        let ad = RunAdvert {
+            id: "i".into(),
+            name: "n".into(),
+            priority: 1001,
+            ready: 1,
+            state: RunState::Running,
+            duration_s: 1.0,
+            seq: 1,
+        };
+        assert!(ad.encode().is_ok_and(|b| RunAdvert::decode(&b).is_err()));
     }
 
     fn outcome() -> TrialOutcome {

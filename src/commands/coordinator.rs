@@ -21,6 +21,10 @@ pub fn coordinator(job: &JobArgs, net: &NetArgs, json: bool) -> Result<(), Failu
             serve_with_view(&session, (run, effects), job, &net.prefix, shutdown, json).await;
         let _ = session.close().await;
         let (ended, view) = served;
-        summary(&job.out, &ended.map_err(|e| Failure::Job(e.into()))?, view)
+        summary(
+            &job.out,
+            &ended.map_err(crate::common::service_failure)?,
+            view,
+        )
     })
 }

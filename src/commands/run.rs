@@ -90,7 +90,7 @@ pub fn run(
             h.abort();
         }
         let _ = session.close().await;
-        let ended = ended.map_err(|e| Failure::Job(e.into()))?;
+        let ended = ended.map_err(crate::common::service_failure)?;
         summary(&job.out, &ended, view)
     })
 }

@@ -94,18 +94,7 @@ async fn list(
     deadline: Instant,
     json: bool,
 ) -> Result<(), Failure> {
-    let answers = query_until(session, &keys::status_all(&net.prefix), deadline).await?;
-    let mut runs: Vec<RunStatus> = answers
-        .iter()
-        .filter_map(|t| match RunStatus::from_json(t) {
-            Ok(s) => Some(s),
-            Err(e) => {
-                tracing::warn!(error = %e, "ignored a status answer");
-                None
-            }
-        })
-        .collect();
-    runs.sort_by(|a, b| a.run.cmp(&b.run));
+    let runs = statuses(session, &net.prefix, deadline).await?;
     if runs.is_empty() {
         eprintln!("no runs answer at {}", net.connect.join(", "));
         return Ok(());
@@ -118,20 +107,74 @@ async fn list(
             }
         } else {
             outln!(
-                "{:<24} {:>5}/{:<5} decided  A {} E {} R {}  {} workers  {:.1} trials/s{}",
+                "{:<24} {}  {:>5}/{:<5} decided  A {} E {} R {}  priority {}  {} workers  {:.1} trials/s  {}",
                 s.run,
+                s.id,
                 s.decided,
                 s.planned,
                 s.accepts,
                 s.equivalents,
                 s.rejects,
+                s.priority,
                 s.workers,
                 s.trials_per_s,
-                if s.finished { "  (finished)" } else { "" }
+                format!("{:?}", s.state).to_lowercase()
             );
         }
     }
     Ok(())
+}
+
+/// Every run that answers a status query, by name then id.
+async fn statuses(
+    session: &Session,
+    prefix: &str,
+    deadline: Instant,
+) -> Result<Vec<RunStatus>, Failure> {
+    let answers = query_until(session, &keys::status_all(prefix), deadline).await?;
+    let mut runs: Vec<RunStatus> = answers
+        .iter()
+        .filter_map(|t| match RunStatus::from_json(t) {
+            Ok(s) => Some(s),
+            Err(e) => {
+                tracing::warn!(error = %e, "ignored a status answer");
+                None
+            }
+        })
+        .collect();
+    runs.sort_by(|a, b| (&a.run, &a.id).cmp(&(&b.run, &b.id)));
+    runs.dedup_by(|a, b| a.id == b.id);
+    Ok(runs)
+}
+
+/// The one run that `run` names: its id, the start of its id, or its name
+/// when only one live run has that name.
+pub async fn resolve(
+    session: &Session,
+    prefix: &str,
+    run: &str,
+    deadline: Instant,
+    connect: &str,
+) -> Result<RunStatus, Failure> {
+    let runs = statuses(session, prefix, deadline).await?;
+    let by_id: Vec<&RunStatus> = runs.iter().filter(|s| s.id.starts_with(run)).collect();
+    let by_name: Vec<&RunStatus> = runs.iter().filter(|s| s.run == run).collect();
+    let found = if by_id.len() == 1 { by_id } else { by_name };
+    match found.as_slice() {
+        [one] => Ok((*one).clone()),
+        [] => Err(Failure::Job(anyhow!(
+            "no coordinator answers for run `{run}` at {connect}: the run is finished or unknown \
+             (`naofarm watch` without a run lists the runs that answer)"
+        ))),
+        many => Err(Failure::Usage(anyhow!(
+            "`{run}` names {} runs; give one of their ids: {}",
+            many.len(),
+            many.iter()
+                .map(|s| s.id.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ))),
+    }
 }
 
 async fn follow(
@@ -142,33 +185,34 @@ async fn follow(
     json: bool,
 ) -> Result<(), Failure> {
     let prefix = &net.prefix;
-    // Subscribe first, then ask: whatever is decided in between comes
+    let status = resolve(session, prefix, run, deadline, &net.connect.join(", ")).await?;
+    let run = status.run.clone();
+    let id = status.id.clone();
+    let rkeys = keys::RunKeys::new(prefix, &run, &id);
+    // Subscribe first, then ask again: whatever is decided in between comes
     // twice and is reported once.
     let results = session
-        .declare_subscriber(keys::results_all(prefix, run))
+        .declare_subscriber(rkeys.results_all())
         .await
         .map_err(zerr)?;
     let trials = session
-        .declare_subscriber(keys::trials_all(prefix, run))
+        .declare_subscriber(rkeys.trials_all())
         .await
         .map_err(zerr)?;
     let statuses = session
-        .declare_subscriber(keys::status(prefix, run))
+        .declare_subscriber(rkeys.status())
         .await
         .map_err(zerr)?;
     let coordinator = session
         .liveliness()
-        .declare_subscriber(keys::coordinator(prefix, run))
+        .declare_subscriber(keys::coordinator(prefix, &id))
         .await
         .map_err(zerr)?;
-    let answers = query_until(session, &keys::status(prefix, run), deadline).await?;
-    let Some(status) = answers.iter().find_map(|t| RunStatus::from_json(t).ok()) else {
-        return Err(Failure::Job(anyhow!(
-            "no coordinator answers for run `{run}` at {}: the run is finished or unknown \
-             (`naofarm watch` without a run lists the runs that answer)",
-            net.connect.join(", ")
-        )));
-    };
+    let answers = query_until(session, &rkeys.status(), deadline).await?;
+    let status = answers
+        .iter()
+        .find_map(|t| RunStatus::from_json(t).ok())
+        .unwrap_or(status);
     if status.finished {
         return Err(Failure::Job(anyhow!(
             "run `{run}` is finished ({} of {} iterations decided); see `naofarm history DIR`",
@@ -176,15 +220,14 @@ async fn follow(
             status.planned
         )));
     }
-    let history: Vec<IterationResult> =
-        match query_until(session, &keys::history(prefix, run), deadline)
-            .await?
-            .first()
-        {
-            Some(text) => serde_json::from_str::<Vec<IterationResult>>(text)
-                .map_err(|e| Failure::Job(anyhow!("the history answer does not parse: {e}")))?,
-            None => Vec::new(),
-        };
+    let history: Vec<IterationResult> = match query_until(session, &rkeys.history(), deadline)
+        .await?
+        .first()
+    {
+        Some(text) => serde_json::from_str::<Vec<IterationResult>>(text)
+            .map_err(|e| Failure::Job(anyhow!("the history answer does not parse: {e}")))?,
+        None => Vec::new(),
+    };
     let mut view = View::new(json);
     view.history(&history);
     view.status(&status);
@@ -246,7 +289,7 @@ async fn follow(
             s = statuses.recv_async() => {
                 let s = s.map_err(zerr)?;
                 match RunStatus::from_json(&String::from_utf8_lossy(&s.payload().to_bytes())) {
-                    Ok(st) if st.run == run => {
+                    Ok(st) if st.id == id => {
                         view.status(&st);
                         ending.status(st.planned, st.finished, tokio::time::Instant::now());
                         last = st;

@@ -5,14 +5,31 @@ use std::time::Duration;
 use anyhow::anyhow;
 
 use crate::{
-    args::NetArgs,
+    args::{NetArgs, WorkerLimits},
     common::Failure,
     net::open_session,
     serve::{runtime, signals},
 };
 
 /// `naofarm worker`.
-pub fn worker(net: &NetArgs, slots: Option<u32>, min_trial_ms: u64) -> Result<(), Failure> {
+pub fn worker(
+    net: &NetArgs,
+    slots: Option<u32>,
+    min_trial_ms: u64,
+    limits: &WorkerLimits,
+) -> Result<(), Failure> {
+    if !(limits.max_duration_s.is_finite() && limits.max_duration_s > 0.0) {
+        return Err(Failure::Usage(anyhow!(
+            "--max-duration-s {}: must be a positive number of seconds",
+            limits.max_duration_s
+        )));
+    }
+    let models = limits
+        .models
+        .iter()
+        .map(|m| protocol::TrialModel::parse(m))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| Failure::Usage(anyhow!("--models: {e}")))?;
     if min_trial_ms > 3_600_000 {
         return Err(Failure::Usage(anyhow!(
             "--min-trial-ms {min_trial_ms}: must be at most 3600000"
@@ -22,6 +39,9 @@ pub fn worker(net: &NetArgs, slots: Option<u32>, min_trial_ms: u64) -> Result<()
     let mut wcfg = worker::service::WorkerConfig {
         prefix: net.prefix.clone(),
         min_trial: Duration::from_millis(min_trial_ms),
+        max_duration_s: limits.max_duration_s,
+        max_substeps: limits.max_substeps,
+        models,
         ..worker::service::WorkerConfig::default()
     };
     if let Some(s) = slots {

@@ -2,7 +2,8 @@
 //!
 //! Modules: [`nao`] (the league's NAO in rapier3d, its walk and trials),
 //! [`synthetic`] (a cheap stand-in model for tests and farm benchmarks),
-//! [`service`] (the zenoh worker), [`fault`] (run-time fault hooks for tests),
+//! [`service`] (the zenoh worker), [`share`] (which run gets a free slot:
+//! fair shares by priority), [`fault`] (run-time fault hooks for tests),
 //! [`noise`] (the seeded noise both models draw from).
 //! [`run_trial`] is the one trial interface, a pure function of the request.
 //!
@@ -14,6 +15,7 @@ pub mod fault;
 pub mod nao;
 pub mod noise;
 pub mod service;
+pub mod share;
 pub mod synthetic;
 
 use protocol::{TrialModel, TrialRequest};

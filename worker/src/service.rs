@@ -1,20 +1,33 @@
-//! The stateless worker service: takes trial requests addressed to it, runs
-//! them on at most `slots` OS threads (never on the async runtime), and
-//! publishes each outcome. It keeps nothing between trials.
+//! The stateless worker service: it asks the runs it hears of for trials
+//! (never more than its free slots), runs them on OS threads (never on the
+//! async runtime), and puts each outcome on its run's key. It keeps nothing
+//! between trials.
+//!
+//! Which run gets a free slot is [`crate::share`]'s choice (fair shares by
+//! priority). The event loop never waits for a trial or a slot: requests,
+//! grants, finished trials, heartbeats and the shutdown signal are all events.
+//! A granted trial beyond the worker's limits (duration, physics, model) is
+//! given back at once with the reason. On shutdown the worker stops asking,
+//! gives back every trial it holds (the coordinators offer them to other
+//! workers at once, without waiting for a lease), drops its liveliness token
+//! and returns; threads still computing are abandoned with the process.
 
 use std::{
-    sync::{
-        atomic::{AtomicU32, Ordering},
-        Arc,
-    },
+    collections::{BTreeMap, BTreeSet},
     time::{Duration, Instant},
 };
 
 use protocol::{
-    keys,
-    wire::{TrialFailure, TrialOutcome, TrialRequest, WireMessage, WorkerPresence},
+    keys::{self, FleetKeys},
+    wire::{
+        RunAdvert, TrialFailure, TrialOutcome, TrialRequest, WireMessage, WorkGrant, WorkRequest,
+        WorkerPresence,
+    },
+    TrialModel,
 };
 use zenoh::Session;
+
+use crate::share::Share;
 
 /// Settings of a worker.
 #[derive(Debug, Clone)]
@@ -23,10 +36,16 @@ pub struct WorkerConfig {
     pub prefix: String,
     /// Trials run at once.
     pub slots: u32,
-    /// Interval of the presence heartbeat.
+    /// Interval of the heartbeat to each run it holds trials of.
     pub heartbeat: Duration,
     /// Minimum wall time of one trial (paces cheap models to benchmark or test the farm).
     pub min_trial: Duration,
+    /// Longest trial accepted, simulated seconds.
+    pub max_duration_s: f64,
+    /// Most physics steps per 20 ms cycle accepted.
+    pub max_substeps: u32,
+    /// Trial models served.
+    pub models: Vec<TrialModel>,
 }
 
 impl Default for WorkerConfig {
@@ -39,7 +58,35 @@ impl Default for WorkerConfig {
                 .unwrap_or(1),
             heartbeat: Duration::from_millis(500),
             min_trial: Duration::ZERO,
+            max_duration_s: 3600.0,
+            max_substeps: 50,
+            models: vec![TrialModel::Nao, TrialModel::Synthetic],
         }
+    }
+}
+
+impl WorkerConfig {
+    /// Why this worker will not run `req`, if it will not.
+    #[must_use]
+    pub fn beyond_limits(&self, req: &TrialRequest) -> Option<String> {
+        if req.duration_s > self.max_duration_s {
+            return Some(format!(
+                "a trial of {} s is beyond this worker's limit of {} s",
+                req.duration_s, self.max_duration_s
+            ));
+        }
+        if req.physics.substeps > self.max_substeps {
+            return Some(format!(
+                "{} physics substeps are beyond this worker's limit of {}",
+                req.physics.substeps, self.max_substeps
+            ));
+        }
+        if !self.models.contains(&req.model) {
+            return Some(
+                format!("this worker does not serve the {:?} model", req.model).to_lowercase(),
+            );
+        }
+        None
     }
 }
 
@@ -60,8 +107,10 @@ fn zerr(e: impl std::fmt::Display) -> WorkerError {
 pub struct WorkerSummary {
     /// Trials run and reported.
     pub trials: u64,
-    /// Requests refused (undecodable) or trials that failed (reported as failures).
+    /// Trials that failed (reported as failures) or were given back (limits, shutdown).
     pub refused: u64,
+    /// The most trials it held at once.
+    pub most_held: u32,
 }
 
 /// Sends a message; one that cannot be encoded or sent is logged.
@@ -84,7 +133,77 @@ fn panic_text(p: Box<dyn std::any::Any + Send>) -> String {
         .unwrap_or_else(|| "(no message)".into())
 }
 
-/// Serves trials until `shutdown` turns true, then finishes what it holds,
+/// A trial's key in the worker: (run id, iteration, trial).
+type Held = (String, u64, u32);
+
+fn give_back(req: &TrialRequest, worker: &str, reason: String, refused: bool) -> TrialFailure {
+    TrialFailure {
+        run: req.run.clone(),
+        iteration: req.iteration,
+        trial: req.trial,
+        seed: req.seed,
+        dispatch: req.dispatch,
+        worker: worker.to_string(),
+        reason,
+        refused,
+    }
+}
+
+/// Runs one trial on a blocking thread: its measurement, or why it failed.
+async fn run_one(
+    req: TrialRequest,
+    min_trial: Duration,
+) -> (Result<crate::Measurement, String>, f64) {
+    let started = Instant::now();
+    let r = tokio::task::spawn_blocking(move || {
+        let out = crate::fault::run_trial(&req);
+        let rest = min_trial.saturating_sub(started.elapsed());
+        if !rest.is_zero() {
+            std::thread::sleep(rest);
+        }
+        out
+    })
+    .await;
+    let result = match r {
+        Ok(Ok(t)) => t.check().map(|()| t),
+        Ok(Err(e)) => Err(e.to_string()),
+        Err(e) if e.is_panic() => Err(format!("panic: {}", panic_text(e.into_panic()))),
+        Err(e) => Err(format!("the trial's thread ended: {e}")),
+    };
+    (result, started.elapsed().as_secs_f64())
+}
+
+/// Asks run `run` for `want` trials; the grant, or why there is none.
+async fn ask(session: Session, work_key: String, req: WorkRequest) -> Result<WorkGrant, String> {
+    let bytes = req.encode().map_err(|e| e.to_string())?;
+    let replies = session
+        .get(work_key)
+        .payload(bytes)
+        .timeout(Duration::from_secs(2))
+        .await
+        .map_err(|e| e.to_string())?;
+    match replies.recv_async().await {
+        Ok(reply) => match reply.result() {
+            Ok(sample) => {
+                WorkGrant::decode(&sample.payload().to_bytes()).map_err(|e| e.to_string())
+            }
+            Err(e) => Err(format!(
+                "the run refused: {}",
+                String::from_utf8_lossy(&e.payload().to_bytes())
+            )),
+        },
+        Err(_) => Err("no answer".into()),
+    }
+}
+
+enum Done {
+    /// A grant (or its failure) for (run, asked).
+    Grant(String, u32, Result<WorkGrant, String>),
+    /// A trial ended.
+    Trial(TrialRequest, Result<crate::Measurement, String>, f64),
+}
+
+/// Serves trials until `shutdown` turns true, then gives back what it holds,
 /// drops its liveliness token and returns.
 pub async fn serve(
     session: Session,
@@ -93,8 +212,8 @@ pub async fn serve(
 ) -> Result<WorkerSummary, WorkerError> {
     let id = uuid::Uuid::new_v4().to_string();
     let prefix = cfg.prefix.clone();
-    let work = session
-        .declare_subscriber(keys::work(&prefix, &id))
+    let adverts = session
+        .declare_subscriber(keys::adverts_all(&prefix))
         .await
         .map_err(zerr)?;
     let token = session
@@ -103,88 +222,101 @@ pub async fn serve(
         .await
         .map_err(zerr)?;
     tracing::info!(worker = %id, slots = cfg.slots, "worker ready");
-    let busy = Arc::new(AtomicU32::new(0));
-    let slots = Arc::new(tokio::sync::Semaphore::new(cfg.slots as usize));
-    let mut tasks = tokio::task::JoinSet::new();
+    let mut share = Share::new();
+    let mut held: BTreeMap<Held, TrialRequest> = BTreeMap::new();
+    let mut asking: u32 = 0;
+    let mut unservable: BTreeSet<String> = BTreeSet::new();
+    let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<Done>();
     let mut summary = WorkerSummary::default();
     let mut beat = tokio::time::interval(cfg.heartbeat);
-    let presence_key = keys::presence(&prefix);
+    beat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let version = env!("CARGO_PKG_VERSION").to_string();
     loop {
         tokio::select! {
+            s = adverts.recv_async() => {
+                let Ok(s) = s else { break };
+                match RunAdvert::decode(&s.payload().to_bytes()) {
+                    Ok(ad) => share.advert(&ad, tokio::time::Instant::now()),
+                    Err(e) => tracing::debug!(error = %e, "ignored an advert"),
+                }
+            }
+            Some(done) = rx.recv() => match done {
+                Done::Grant(run, asked, grant) => {
+                    asking -= asked;
+                    let (trials, ready) = match grant {
+                        Ok(g) => {
+                            if let Some(note) = &g.note {
+                                tracing::debug!(run, note, "short grant");
+                            }
+                            (g.trials, Some(g.ready))
+                        }
+                        Err(e) => {
+                            tracing::debug!(run, error = %e, "no grant");
+                            (Vec::new(), None)
+                        }
+                    };
+                    let got = u32::try_from(trials.len()).unwrap_or(u32::MAX);
+                    share.granted(&run, asked, got, ready);
+                    for req in trials {
+                        if req.run != run {
+                            tracing::warn!(run, other = %req.run, "a grant held another run's trial; ignored");
+                            share.done(&run, 0.0);
+                            continue;
+                        }
+                        let fkeys = FleetKeys::new(&prefix, &req.run);
+                        if let Some(why) = cfg.beyond_limits(&req) {
+                            if unservable.insert(run.clone()) {
+                                tracing::warn!(run, %why, "this worker will not serve the run");
+                            }
+                            share.unservable(&run, &why);
+                            share.done(&run, 0.0);
+                            summary.refused += 1;
+                            put_message(&session, &fkeys.failures(), &give_back(&req, &id, why, true)).await;
+                            continue;
+                        }
+                        tracing::debug!(run, iteration = req.iteration, trial = req.trial, "trial started");
+                        held.insert((req.run.clone(), req.iteration, req.trial), req.clone());
+                        let tx = tx.clone();
+                        let min_trial = cfg.min_trial;
+                        tokio::spawn(async move {
+                            let (r, wall) = run_one(req.clone(), min_trial).await;
+                            let _ = tx.send(Done::Trial(req, r, wall));
+                        });
+                    }
+                    summary.most_held = summary.most_held.max(u32::try_from(held.len()).unwrap_or(u32::MAX));
+                }
+                Done::Trial(req, result, wall) => {
+                    if held.remove(&(req.run.clone(), req.iteration, req.trial)).is_none() {
+                        continue; // given back already (shutdown)
+                    }
+                    share.done(&req.run, wall);
+                    let fkeys = FleetKeys::new(&prefix, &req.run);
+                    match result {
+                        Ok(m) => {
+                            let mut o = TrialOutcome::answer(&req, id.clone(), m, wall);
+                            crate::fault::tamper(&mut o);
+                            put_message(&session, &fkeys.outcomes(), &o).await;
+                            summary.trials += 1;
+                        }
+                        Err(reason) => {
+                            tracing::error!(%reason, iteration = req.iteration, trial = req.trial, "trial could not run; reporting it");
+                            put_message(&session, &fkeys.failures(), &give_back(&req, &id, reason, false)).await;
+                            summary.refused += 1;
+                        }
+                    }
+                }
+            },
             _ = beat.tick() => {
+                share.expire(tokio::time::Instant::now());
+                let runs: BTreeSet<&String> = held.keys().map(|(r, _, _)| r).collect();
                 let p = WorkerPresence {
                     worker: id.clone(),
                     slots: cfg.slots,
-                    busy: busy.load(Ordering::Relaxed).min(cfg.slots),
-                    version: env!("CARGO_PKG_VERSION").to_string(),
+                    busy: u32::try_from(held.len()).unwrap_or(u32::MAX).min(cfg.slots),
+                    version: version.clone(),
                 };
-                put_message(&session, &presence_key, &p).await;
-            }
-            s = work.recv_async() => {
-                let Ok(s) = s else { break };
-                let req = match TrialRequest::decode(&s.payload().to_bytes()) {
-                    Ok(r) => r,
-                    Err(e) => {
-                        summary.refused += 1;
-                        tracing::warn!(error = %e, "refused a trial request");
-                        continue;
-                    }
-                };
-                let Ok(permit) = slots.clone().acquire_owned().await else { break };
-                let session = session.clone();
-                let id = id.clone();
-                let busy = busy.clone();
-                let prefix = prefix.clone();
-                let min_trial = cfg.min_trial;
-                busy.fetch_add(1, Ordering::Relaxed);
-                tasks.spawn(async move {
-                    let started = Instant::now();
-                    let asked = req.clone();
-                    let r = tokio::task::spawn_blocking(move || {
-                        let out = crate::fault::run_trial(&req);
-                        let rest = min_trial.saturating_sub(started.elapsed());
-                        if !rest.is_zero() {
-                            std::thread::sleep(rest);
-                        }
-                        out
-                    })
-                    .await;
-                    busy.fetch_sub(1, Ordering::Relaxed);
-                    drop(permit);
-                    let result = match r {
-                        Ok(Ok(t)) => t.check().map(|()| t),
-                        Ok(Err(e)) => Err(e.to_string()),
-                        Err(e) if e.is_panic() => Err(format!("panic: {}", panic_text(e.into_panic()))),
-                        Err(e) => Err(format!("the trial's thread ended: {e}")),
-                    };
-                    match result {
-                        Ok(m) => {
-                            let mut o = TrialOutcome::answer(&asked, id, m, started.elapsed().as_secs_f64());
-                            crate::fault::tamper(&mut o);
-                            put_message(&session, &keys::outcomes(&prefix), &o).await;
-                            true
-                        }
-                        Err(reason) => {
-                            tracing::error!(%reason, iteration = asked.iteration, trial = asked.trial, "trial could not run; reporting it");
-                            let f = TrialFailure {
-                                run: asked.run,
-                                iteration: asked.iteration,
-                                trial: asked.trial,
-                                seed: asked.seed,
-                                dispatch: asked.dispatch,
-                                worker: id,
-                                reason,
-                            };
-                            put_message(&session, &keys::failures(&prefix), &f).await;
-                            false
-                        }
-                    }
-                });
-            }
-            Some(done) = tasks.join_next(), if !tasks.is_empty() => {
-                match done {
-                    Ok(true) => summary.trials += 1,
-                    _ => summary.refused += 1,
+                for run in runs {
+                    put_message(&session, &FleetKeys::new(&prefix, run).presence(), &p).await;
                 }
             }
             _ = shutdown.changed() => {
@@ -193,14 +325,50 @@ pub async fn serve(
                 }
             }
         }
-    }
-    // Stop taking work, finish what we hold, then leave.
-    drop(work);
-    while let Some(done) = tasks.join_next().await {
-        match done {
-            Ok(true) => summary.trials += 1,
-            _ => summary.refused += 1,
+        // Fill free slots: never more than free, one request per run at a time.
+        let busy = u32::try_from(held.len()).unwrap_or(u32::MAX);
+        let free = cfg.slots.saturating_sub(busy + asking);
+        if free > 0 {
+            for (run, want) in share.pick(free, cfg.max_duration_s) {
+                asking += want;
+                let req = WorkRequest {
+                    worker: id.clone(),
+                    want,
+                    slots: cfg.slots,
+                    busy,
+                    max_duration_s: cfg.max_duration_s,
+                    version: version.clone(),
+                };
+                let key = FleetKeys::new(&prefix, &run).work();
+                let session = session.clone();
+                let tx = tx.clone();
+                tokio::spawn(async move {
+                    let g = ask(session, key, req).await;
+                    let _ = tx.send(Done::Grant(run, want, g));
+                });
+            }
         }
+    }
+    // Stop asking; give back what we hold, so it is run elsewhere at once
+    // (grants still on their way included: each ask times out within 2 s).
+    drop(adverts);
+    let late = tokio::time::Instant::now() + Duration::from_secs(3);
+    while asking > 0 {
+        match tokio::time::timeout_at(late, rx.recv()).await {
+            Ok(Some(Done::Grant(_, asked, grant))) => {
+                asking -= asked;
+                for req in grant.map(|g| g.trials).unwrap_or_default() {
+                    held.insert((req.run.clone(), req.iteration, req.trial), req);
+                }
+            }
+            Ok(Some(Done::Trial(..))) => {}
+            Ok(None) | Err(_) => break,
+        }
+    }
+    for ((run, _, _), req) in std::mem::take(&mut held) {
+        summary.refused += 1;
+        let f = give_back(&req, &id, "the worker is stopping".into(), true);
+        put_message(&session, &FleetKeys::new(&prefix, &run).failures(), &f).await;
     }
     if let Err(e) = token.undeclare().await {
         tracing::warn!(error = %e, "undeclaring the liveliness token failed");
