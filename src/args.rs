@@ -51,6 +51,10 @@ pub enum Command {
         /// Minimum wall time per trial in ms (paces the synthetic model for farm tests and benchmarks).
         #[arg(long, default_value_t = 0)]
         min_trial_ms: u64,
+        /// Heartbeat interval to each run it holds trials of, ms (keep it
+        /// well under the coordinators' --silence-s).
+        #[arg(long, default_value_t = 500)]
+        heartbeat_ms: u64,
         #[command(flatten)]
         limits: WorkerLimits,
     },
@@ -146,6 +150,10 @@ pub struct JobArgs {
     /// Seconds a worker may hold a trial before it is given to another.
     #[arg(long, default_value_t = 120.0)]
     pub lease_s: f64,
+    /// A worker not heard from (work request, heartbeat, outcome) for this
+    /// long is silent; after four such periods its trials are offered again.
+    #[arg(long, default_value_t = 3.0)]
+    pub silence_s: f64,
     /// Distinct workers that may fail one trial before the run stops (1–100;
     /// a resumed run may raise it to retry the trial that stopped it).
     #[arg(long, default_value_t = 3)]

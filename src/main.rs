@@ -66,8 +66,9 @@ fn dispatch(cli: Cli) -> Result<(), Failure> {
             net,
             slots,
             min_trial_ms,
+            heartbeat_ms,
             limits,
-        } => commands::worker::worker(&net, slots, min_trial_ms, &limits),
+        } => commands::worker::worker(&net, slots, min_trial_ms, heartbeat_ms, &limits),
         Command::Router { listen, config } => commands::router::router(&listen, config.as_deref()),
         Command::Ctl {
             run,

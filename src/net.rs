@@ -10,7 +10,9 @@ fn json_list(v: &[String]) -> String {
 
 impl NetArgs {
     /// Builds the zenoh config. Without a file, multicast scouting is off:
-    /// naofarm finds its peers through explicit endpoints only.
+    /// naofarm finds its peers through explicit endpoints only, and a
+    /// process that only connects (no endpoint to listen on) is a zenoh
+    /// client: a peer without listeners behind a router is not routed to.
     pub fn zenoh_config(&self, default_listen: &[&str]) -> anyhow::Result<zenoh::Config> {
         protocol::keys::check_chunk("prefix", &self.prefix).map_err(anyhow::Error::msg)?;
         let mut cfg = match &self.config {
@@ -37,6 +39,37 @@ impl NetArgs {
             cfg.insert_json5("connect/endpoints", &json_list(&self.connect))
                 .map_err(|e| anyhow::anyhow!("--connect: {e}"))?;
         }
+        if self.config.is_none()
+            && self.listen.is_empty()
+            && default_listen.is_empty()
+            && !self.connect.is_empty()
+        {
+            // Only connecting (to a router, or to a coordinator that listens):
+            // a client, so that everything it says is routed, not lost
+            // on a peer nobody can reach.
+            cfg.insert_json5("mode", "\"client\"")
+                .map_err(|e| anyhow::anyhow!("mode: {e}"))?;
+            // Wait for the router (or coordinator) to come up, as peers do.
+            cfg.insert_json5("connect/timeout_ms", "-1")
+                .map_err(|e| anyhow::anyhow!("connect: {e}"))?;
+            cfg.insert_json5("connect/exit_on_failure", "false")
+                .map_err(|e| anyhow::anyhow!("connect: {e}"))?;
+        }
+        Ok(cfg)
+    }
+
+    /// As [`NetArgs::zenoh_config`], for a command that gives up: connecting
+    /// fails after `timeout_s` instead of waiting for the other end.
+    pub fn zenoh_config_within(&self, timeout_s: f64) -> anyhow::Result<zenoh::Config> {
+        let mut cfg = self.zenoh_config(&[])?;
+        if self.config.is_none() {
+            #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+            let ms = (timeout_s * 1000.0).ceil() as u64;
+            cfg.insert_json5("connect/timeout_ms", &ms.to_string())
+                .map_err(|e| anyhow::anyhow!("connect: {e}"))?;
+            cfg.insert_json5("connect/exit_on_failure", "true")
+                .map_err(|e| anyhow::anyhow!("connect: {e}"))?;
+        }
         Ok(cfg)
     }
 }
@@ -52,4 +85,26 @@ pub async fn open_session(cfg: zenoh::Config) -> Result<zenoh::Session, crate::c
     zenoh::open(cfg)
         .await
         .map_err(|e| crate::common::Failure::Job(anyhow::anyhow!("zenoh: {e}")))
+}
+
+/// Prints the endpoints a session really listens on (a `:0` port resolved):
+/// `ROLE listening on ENDPOINT`, one line each, for scripts and tests.
+pub async fn say_endpoints(session: &zenoh::Session, role: &str) {
+    for l in session.info().locators().await {
+        eprintln!("{role} listening on {l}");
+    }
+}
+
+/// Opens a session for a command that only asks (watch, ctl): a connection
+/// that cannot be made says that nothing answers there.
+pub async fn open_asking(
+    cfg: zenoh::Config,
+    connect: &[String],
+) -> Result<zenoh::Session, crate::common::Failure> {
+    zenoh::open(cfg).await.map_err(|e| {
+        crate::common::Failure::Job(anyhow::anyhow!(
+            "nothing answers at {}: no coordinator or router listens there, so the run is finished or unknown ({e})",
+            connect.join(", ")
+        ))
+    })
 }

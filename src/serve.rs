@@ -65,6 +65,12 @@ pub fn open_run(job: &JobArgs) -> Result<(Run, Vec<coordinator::run::Effect>), F
         exp.model = TrialModel::parse(m).map_err(|e| Failure::Usage(anyhow!("--model: {e}")))?;
     }
     exp.validate().map_err(|e| Failure::Usage(e.into()))?;
+    if !(job.silence_s.is_finite() && (0.1..=3600.0).contains(&job.silence_s)) {
+        return Err(Failure::Usage(anyhow!(
+            "--silence-s {}: must be in [0.1, 3600] seconds",
+            job.silence_s
+        )));
+    }
     if !(job.lease_s.is_finite() && (1.0..=86_400.0).contains(&job.lease_s)) {
         return Err(Failure::Usage(anyhow!(
             "--lease-s {}: must be in [1, 86400] seconds",
@@ -129,6 +135,7 @@ pub fn service_config(job: &JobArgs, prefix: &str) -> ServiceConfig {
     ServiceConfig {
         prefix: prefix.to_string(),
         lease: Duration::from_secs_f64(job.lease_s),
+        silence: Duration::from_secs_f64(job.silence_s),
         ..ServiceConfig::default()
     }
 }

@@ -12,12 +12,9 @@ use std::{
     time::{Duration, Instant},
 };
 
-use coordinator::{
-    evolve::DecidedIteration,
-    journal::{Journal, Record},
-};
+use coordinator::journal::{Journal, Record};
 
-use util::{events, naofarm, root, scratch, succeed, Proc};
+use util::{bits, decided, events, naofarm, root, scratch, succeed, Proc};
 
 const TIMEOUT: Duration = Duration::from_secs(120);
 
@@ -221,34 +218,6 @@ fn holding_a_trial(p: &Proc) {
 
 fn journal(dir: &Path) -> Vec<Record> {
     Journal::read(dir).unwrap().records()
-}
-
-fn decided(records: &[Record]) -> Vec<DecidedIteration> {
-    records
-        .iter()
-        .filter_map(|r| {
-            if let Record::Decided(d) = r {
-                Some(d.clone())
-            } else {
-                None
-            }
-        })
-        .collect()
-}
-
-fn bits(h: &[DecidedIteration]) -> Vec<u64> {
-    let mut v = Vec::new();
-    for d in h {
-        v.push(d.iteration);
-        v.extend(d.params.iter().map(|x| x.to_bits()));
-        v.push(d.decision as u64);
-        v.extend(
-            [d.stats.mx, d.stats.my, d.stats.ex]
-                .iter()
-                .map(|x| x.map_or(u64::MAX, f64::to_bits)),
-        );
-    }
-    v
 }
 
 fn assert_every_trial_once(records: &[Record], iterations: u64) {

@@ -132,6 +132,9 @@ struct State {
     /// the next advert before asking again).
     advert: (u64, bool, bool),
     stopped: Option<String>,
+    /// Workers whose token went, and when: their trials go back to the queue
+    /// after [`GONE_GRACE`] (what they gave back on their way out counts first).
+    gone: Vec<(String, Instant)>,
     opened: BTreeMap<u64, OpenedIteration>,
     sched: Scheduler,
     dispatch: u64,
@@ -367,6 +370,7 @@ pub async fn serve(
         fkeys,
         advert: (0, false, false),
         stopped: None,
+        gone: Vec::new(),
         opened: BTreeMap::new(),
         dispatch: 0,
         counters: Counters::default(),
@@ -440,7 +444,7 @@ pub async fn serve(
                 let s = s.map_err(zerr)?;
                 if s.kind() == SampleKind::Delete {
                     let wid = keys::last_chunk(s.key_expr().as_str()).to_string();
-                    st.requeue_worker(&wid)?;
+                    st.gone.push((wid, Instant::now()));
                 }
             }
             q = work_q.recv_async() => {
@@ -460,7 +464,15 @@ pub async fn serve(
                 reply_json(&q, serde_json::to_string(&st.history).map_err(|e| e.to_string())).await;
             }
             _ = tick.tick() => {
-                let t = st.sched.tick(Instant::now());
+                let now = Instant::now();
+                let (due, later): (Vec<_>, Vec<_>) = std::mem::take(&mut st.gone)
+                    .into_iter()
+                    .partition(|(_, at)| now.saturating_duration_since(*at) >= GONE_GRACE);
+                st.gone = later;
+                for (wid, _) in due {
+                    st.requeue_worker(&wid)?;
+                }
+                let t = st.sched.tick(now);
                 for (trial, worker) in t.expired {
                     if st.run.is_pending(trial.0, trial.1) {
                         tracing::info!(iteration = trial.0, trial = trial.1, %worker, "lease expired; the trial is offered again");
@@ -482,6 +494,11 @@ pub async fn serve(
         }
     }
 }
+
+/// How long after a worker's token went its trials go back to the queue: a
+/// worker that stops gives back what it holds just before, and those
+/// messages may arrive after the token's end.
+pub const GONE_GRACE: Duration = Duration::from_millis(500);
 
 /// How often a run repeats its advert (workers forget a run not heard for three of these).
 pub const ADVERT_EVERY: Duration = Duration::from_millis(500);

@@ -9,13 +9,19 @@ use crate::{
 
 /// `naofarm coordinator`.
 pub fn coordinator(job: &JobArgs, net: &NetArgs, json: bool) -> Result<(), Failure> {
-    let cfg = net
-        .zenoh_config(&["tcp/127.0.0.1:7447"])
-        .map_err(Failure::Usage)?;
+    // Listening on 7447 by default, unless it connects to a router (many
+    // coordinators then share one host).
+    let default_listen: &[&str] = if net.connect.is_empty() {
+        &["tcp/127.0.0.1:7447"]
+    } else {
+        &[]
+    };
+    let cfg = net.zenoh_config(default_listen).map_err(Failure::Usage)?;
     let (run, effects) = open_run(job)?;
     let rt = runtime()?;
     rt.block_on(async {
         let session = open_session(cfg).await?;
+        crate::net::say_endpoints(&session, "coordinator").await;
         let shutdown = signals();
         let served =
             serve_with_view(&session, (run, effects), job, &net.prefix, shutdown, json).await;

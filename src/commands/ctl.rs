@@ -10,7 +10,7 @@ use protocol::{
     wire::{Control, ControlRequest, RunStatus, WireMessage},
 };
 
-use crate::{args::NetArgs, common::Failure, net::open_session, serve::runtime};
+use crate::{args::NetArgs, common::Failure, serve::runtime};
 
 /// Parses `pause | resume | stop | priority N`.
 pub fn parse_action(words: &[String]) -> Result<Control, String> {
@@ -53,10 +53,10 @@ pub fn ctl(run: &str, words: &[String], net: &NetArgs, timeout_s: f64) -> Result
     if net.connect.is_empty() && net.config.is_none() {
         net.connect.push("tcp/127.0.0.1:7447".into());
     }
-    let cfg = net.zenoh_config(&[]).map_err(Failure::Usage)?;
+    let cfg = net.zenoh_config_within(timeout_s).map_err(Failure::Usage)?;
     let rt = runtime()?;
     rt.block_on(async {
-        let session = open_session(cfg).await?;
+        let session = crate::net::open_asking(cfg, &net.connect).await?;
         let deadline = Instant::now() + Duration::from_secs_f64(timeout_s);
         let status = crate::commands::watch::resolve(
             &session,

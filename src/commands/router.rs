@@ -23,9 +23,7 @@ pub fn router(listen: &[String], config: Option<&std::path::Path>) -> Result<(),
     rt.block_on(async {
         let session = open_session(cfg).await?;
         // The endpoints really bound (a `:0` port resolved), for scripts and tests.
-        for l in session.info().locators().await {
-            eprintln!("router listening on {l}");
-        }
+        crate::net::say_endpoints(&session, "router").await;
         eprintln!("router ready (zid {})", session.zid());
         let mut shutdown = crate::serve::signals();
         while !*shutdown.borrow() {

@@ -70,14 +70,16 @@ pub fn watch(a: &WatchArgs) -> Result<(), Failure> {
     if net.connect.is_empty() && net.config.is_none() {
         net.connect.push(DEFAULT_CONNECT.to_string());
     }
-    let cfg = net.zenoh_config(&[]).map_err(Failure::Usage)?;
+    let cfg = net
+        .zenoh_config_within(a.timeout_s)
+        .map_err(Failure::Usage)?;
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
         .build()
         .map_err(|e| Failure::Job(e.into()))?;
     rt.block_on(async {
-        let session = crate::net::open_session(cfg).await?;
+        let session = crate::net::open_asking(cfg, &net.connect).await?;
         let deadline = Instant::now() + Duration::from_secs_f64(a.timeout_s);
         let r = match &a.run {
             None => list(&session, &net, deadline, a.json).await,

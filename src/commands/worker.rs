@@ -16,8 +16,14 @@ pub fn worker(
     net: &NetArgs,
     slots: Option<u32>,
     min_trial_ms: u64,
+    heartbeat_ms: u64,
     limits: &WorkerLimits,
 ) -> Result<(), Failure> {
+    if !(10..=60_000).contains(&heartbeat_ms) {
+        return Err(Failure::Usage(anyhow!(
+            "--heartbeat-ms {heartbeat_ms}: must be in 10..=60000"
+        )));
+    }
     if !(limits.max_duration_s.is_finite() && limits.max_duration_s > 0.0) {
         return Err(Failure::Usage(anyhow!(
             "--max-duration-s {}: must be a positive number of seconds",
@@ -39,6 +45,7 @@ pub fn worker(
     let mut wcfg = worker::service::WorkerConfig {
         prefix: net.prefix.clone(),
         min_trial: Duration::from_millis(min_trial_ms),
+        heartbeat: Duration::from_millis(heartbeat_ms),
         max_duration_s: limits.max_duration_s,
         max_substeps: limits.max_substeps,
         models,
@@ -51,7 +58,7 @@ pub fn worker(
         wcfg.slots = s;
     }
     let rt = runtime()?;
-    rt.block_on(async {
+    let done = rt.block_on(async {
         let session = open_session(cfg).await?;
         let shutdown = signals();
         let s = worker::service::serve(session.clone(), wcfg, shutdown)
@@ -59,9 +66,13 @@ pub fn worker(
             .map_err(|e| Failure::Job(e.into()))?;
         let _ = session.close().await;
         eprintln!(
-            "worker stopped: {} trials run, {} refused",
-            s.trials, s.refused
+            "worker stopped: {} trials run, {} given back or failed, at most {} held",
+            s.trials, s.refused, s.most_held
         );
         Ok(())
-    })
+    });
+    // Trials it gave back may still be computing on their threads: they are
+    // abandoned, not waited for.
+    rt.shutdown_background();
+    done
 }

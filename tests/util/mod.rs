@@ -137,3 +137,32 @@ pub fn events(stdout: &[u8]) -> Events {
     }
     e
 }
+
+/// The decided iterations among a journal's records.
+pub fn decided(
+    records: &[coordinator::journal::Record],
+) -> Vec<coordinator::evolve::DecidedIteration> {
+    records
+        .iter()
+        .filter_map(|r| match r {
+            coordinator::journal::Record::Decided(d) => Some(d.clone()),
+            _ => None,
+        })
+        .collect()
+}
+
+/// A history as bits: iterations, parameters, decisions and statistics.
+pub fn bits(h: &[coordinator::evolve::DecidedIteration]) -> Vec<u64> {
+    let mut v = Vec::new();
+    for d in h {
+        v.push(d.iteration);
+        v.extend(d.params.iter().map(|x| x.to_bits()));
+        v.push(d.decision as u64);
+        v.extend(
+            [d.stats.mx, d.stats.my, d.stats.ex]
+                .iter()
+                .map(|x| x.map_or(u64::MAX, f64::to_bits)),
+        );
+    }
+    v
+}

@@ -1,0 +1,338 @@
+//! One fleet, many runs, through one `naofarm router` on 127.0.0.1: runs of
+//! the same name, priorities, `watch` listing, `ctl`, a copied run directory,
+//! and a worker offered far more than its slots.
+#![allow(clippy::unwrap_used)]
+
+mod util;
+
+use std::{
+    path::{Path, PathBuf},
+    process::{Command, Stdio},
+    time::{Duration, Instant},
+};
+
+use coordinator::journal::{Control, Journal, Record};
+use util::{bits, decided, events, fails, naofarm, root, scratch, succeed, Proc};
+
+const TIMEOUT: Duration = Duration::from_secs(120);
+
+/// The synthetic test experiment as `name` with `seed`, `iterations`, written to `dir/file`.
+fn experiment(dir: &Path, file: &str, name: &str, seed: u64, iterations: u64) -> PathBuf {
+    let text = std::fs::read_to_string(root().join("experiments/test/two-parameters.toml"))
+        .unwrap()
+        .replace("name = \"syn\"", &format!("name = \"{name}\""))
+        .replace("seed = 42", &format!("seed = {seed}"))
+        .replace("iterations = 40", &format!("iterations = {iterations}"))
+        .replace("n_mcmc = 200", "n_mcmc = 100");
+    let p = dir.join(file);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+/// Waits until `p`'s stderr has a line with `needle`; returns that line.
+fn wait_line(p: &Proc, needle: &str) -> String {
+    let deadline = Instant::now() + TIMEOUT;
+    loop {
+        if let Some(l) = p.stderr().lines().find(|l| l.contains(needle)) {
+            return l.to_string();
+        }
+        assert!(Instant::now() < deadline, "never logged `{needle}`");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// A `naofarm router` on a port the OS picks; its endpoint, read from the router itself.
+fn router(dir: &Path) -> (Proc, String) {
+    let p = Proc::spawn(
+        naofarm()
+            .args(["router", "--listen", "tcp/127.0.0.1:0"])
+            .stdout(Stdio::null()),
+        dir,
+        "router",
+    );
+    let line = wait_line(&p, "router listening on tcp/127.0.0.1:");
+    let endpoint = line.rsplit(' ').next().unwrap().trim().to_string();
+    (p, endpoint)
+}
+
+fn coordinator(dir: &Path, exp: &Path, out: &Path, ep: &str, priority: u32) -> Proc {
+    Proc::spawn(
+        naofarm()
+            .args(["coordinator", "--json", "--connect", ep])
+            .arg(exp)
+            .arg("--out")
+            .arg(out)
+            .args(["--priority", &priority.to_string()])
+            .env("RUST_LOG", "warn,naofarm_coordinator::service=info")
+            .stdout(std::fs::File::create(out.with_extension("stdout")).unwrap()),
+        dir,
+        "coordinator",
+    )
+}
+
+fn worker(dir: &Path, ep: &str, slots: u32, pace_ms: u64, extra: &[&str]) -> Proc {
+    Proc::spawn(
+        naofarm()
+            .args(["worker", "--connect", ep, "--slots", &slots.to_string()])
+            .args(["--min-trial-ms", &pace_ms.to_string()])
+            .args(extra)
+            .env("RUST_LOG", "warn,naofarm_worker::service=debug")
+            .stdout(Stdio::null()),
+        dir,
+        "worker",
+    )
+}
+
+/// Waits for `p` to exit (under the deadline); its status.
+fn wait_exit(p: &mut Proc) -> std::process::ExitStatus {
+    let deadline = Instant::now() + TIMEOUT;
+    loop {
+        if let Some(s) = p.child.try_wait().unwrap() {
+            return s;
+        }
+        assert!(Instant::now() < deadline, "the process never exited");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn records(out: &Path) -> Vec<Record> {
+    Journal::read(out).unwrap().records()
+}
+
+fn finished(out: &Path) -> serde_json::Value {
+    let text = std::fs::read(out.with_extension("stdout")).unwrap();
+    events(&text).finished.expect("a finished line")
+}
+
+/// The run's history alone: `naofarm run` with its own local workers.
+fn alone(dir: &Path, exp: &Path, name: &str) -> Vec<u64> {
+    let out = dir.join(name);
+    succeed(naofarm().arg("run").arg(exp).arg("--out").arg(&out).args([
+        "--workers",
+        "2",
+        "--json",
+    ]));
+    bits(&decided(&records(&out)))
+}
+
+fn ctl(ep: &str, args: &[&str]) -> Command {
+    let mut c = naofarm();
+    c.arg("ctl").args(args).args(["--connect", ep]);
+    c
+}
+
+/// The runs `watch` lists, as JSON statuses, once `n` answer.
+fn listed(ep: &str, n: usize) -> Vec<serde_json::Value> {
+    let deadline = Instant::now() + TIMEOUT;
+    loop {
+        let out = succeed(naofarm().args(["watch", "--json", "--connect", ep]));
+        let runs: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect();
+        if runs.len() >= n {
+            return runs;
+        }
+        assert!(Instant::now() < deadline, "only {} runs listed", runs.len());
+    }
+}
+
+#[test]
+fn runs_of_one_name_share_a_fleet_each_as_if_alone_and_obey_ctl() {
+    let dir = scratch("fleet-share");
+    let a = experiment(&dir, "a.toml", "farm", 5, 16);
+    let b = experiment(&dir, "b.toml", "farm", 6, 16);
+    let c = experiment(&dir, "c.toml", "other", 7, 16);
+    let want = [
+        alone(&dir, &a, "a-alone"),
+        alone(&dir, &b, "b-alone"),
+        alone(&dir, &c, "c-alone"),
+    ];
+    assert_ne!(want[0], want[1], "two seeds, two histories");
+
+    let (_router, ep) = router(&dir);
+    let outs = [dir.join("a"), dir.join("b"), dir.join("c")];
+    let mut cs: Vec<Proc> = [(&a, 1), (&b, 2), (&c, 3)]
+        .iter()
+        .zip(&outs)
+        .map(|((exp, p), out)| coordinator(&dir, exp, out, &ep, *p))
+        .collect();
+    // No worker yet: every run waits, and `watch` lists all three.
+    let runs = listed(&ep, 3);
+    let farm: Vec<&serde_json::Value> = runs.iter().filter(|r| r["run"] == "farm").collect();
+    assert_eq!(farm.len(), 2, "{runs:?}");
+    assert_ne!(
+        farm[0]["id"], farm[1]["id"],
+        "two runs of one name are two runs"
+    );
+    let mut priorities: Vec<u64> = runs
+        .iter()
+        .map(|r| r["priority"].as_u64().unwrap())
+        .collect();
+    priorities.sort_unstable();
+    assert_eq!(priorities, [1, 2, 3]);
+    let text =
+        String::from_utf8_lossy(&succeed(naofarm().args(["watch", "--connect", &ep])).stdout)
+            .to_string();
+    assert!(
+        text.contains("priority 3") && text.contains("running"),
+        "{text}"
+    );
+
+    // The name is ambiguous; an id is not.
+    let err = fails(&mut ctl(&ep, &["farm", "pause"]), 2);
+    assert!(err.contains("names 2 runs"), "{err}");
+    let id_a = Journal::read(&outs[0])
+        .unwrap()
+        .records()
+        .iter()
+        .find_map(|r| match r {
+            Record::Identity { id } => Some(id.clone()),
+            _ => None,
+        })
+        .expect("a run id journaled at creation");
+    let said = succeed(&mut ctl(&ep, &[&id_a, "pause"]));
+    assert!(String::from_utf8_lossy(&said.stdout).contains("paused"));
+    let err = fails(&mut ctl(&ep, &[&id_a, "priority", "0"]), 2);
+    assert!(err.contains("priority 0"), "{err}");
+    succeed(&mut ctl(&ep, &[&id_a[..8], "priority", "4"]));
+
+    // A copy of a served run directory is refused.
+    let copy = dir.join("a-copy");
+    std::fs::create_dir_all(&copy).unwrap();
+    std::fs::copy(outs[0].join("journal.nfj"), copy.join("journal.nfj")).unwrap();
+    let err = fails(
+        naofarm()
+            .arg("coordinator")
+            .arg(&a)
+            .arg("--out")
+            .arg(&copy)
+            .args(["--connect", &ep]),
+        2,
+    );
+    assert!(err.contains("already served"), "{err}");
+
+    let _ws: Vec<Proc> = (0..3).map(|_| worker(&dir, &ep, 2, 5, &[])).collect();
+    // b and c finish; a, paused, decides nothing until it is resumed.
+    for i in [1, 2] {
+        assert!(wait_exit(&mut cs[i]).success());
+    }
+    assert!(
+        decided(&records(&outs[0])).is_empty(),
+        "a paused run got no work"
+    );
+    succeed(&mut ctl(&ep, &[&id_a, "resume"]));
+    assert!(wait_exit(&mut cs[0]).success());
+
+    for (i, out) in outs.iter().enumerate() {
+        let rs = records(out);
+        assert_eq!(
+            bits(&decided(&rs)),
+            want[i],
+            "run {i}: the history of the run alone"
+        );
+        let f = finished(out);
+        assert_eq!(f["accepted"], 16 * 6, "run {i}: {f}");
+        assert_eq!(
+            f["refused"], 0,
+            "run {i}: no foreign outcome even reached it: {f}"
+        );
+    }
+    let controls: Vec<Control> = records(&outs[0])
+        .into_iter()
+        .filter_map(|r| match r {
+            Record::Control { action, .. } => Some(action),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        controls,
+        [Control::Pause, Control::Priority(4), Control::Resume],
+        "journaled, so a resume keeps them"
+    );
+    // A finished run is no longer served: ctl says so.
+    let err = fails(&mut ctl(&ep, &[&id_a, "pause", "--timeout-s", "2"]), 1);
+    assert!(err.contains("no coordinator answers"), "{err}");
+}
+
+#[test]
+fn a_worker_offered_far_more_than_its_slots_holds_its_slots_and_stops_at_once() {
+    let dir = scratch("fleet-slots");
+    // 10 trials per iteration, 3 iterations open: 30 ready for a 2-slot worker.
+    let text = std::fs::read_to_string(experiment(&dir, "e.toml", "slots", 9, 6))
+        .unwrap()
+        .replace("trials_per_iteration = 6", "trials_per_iteration = 10");
+    let exp = dir.join("slots.toml");
+    std::fs::write(&exp, text).unwrap();
+    let (_router, ep) = router(&dir);
+    let out = dir.join("run");
+    let mut c = Proc::spawn(
+        naofarm()
+            .args([
+                "coordinator",
+                "--json",
+                "--connect",
+                &ep,
+                "--silence-s",
+                "0.5",
+            ])
+            .arg(&exp)
+            .arg("--out")
+            .arg(&out)
+            .env("RUST_LOG", "warn,naofarm_coordinator::service=info")
+            .stdout(std::fs::File::create(out.with_extension("stdout")).unwrap()),
+        &dir,
+        "coordinator",
+    );
+    // Trials of a minute: the worker holds its two and heartbeats every 0.1 s.
+    let mut slow = worker(&dir, &ep, 2, 60_000, &["--heartbeat-ms", "100"]);
+    let deadline = Instant::now() + TIMEOUT;
+    while slow.stderr().matches("trial started").count() < 2 {
+        assert!(
+            Instant::now() < deadline,
+            "the slow worker never took two trials"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    // A quick worker runs every other open trial meanwhile (28 at 0.1 s
+    // each: over five silence periods of 0.5 s; the next iteration waits on
+    // the slow worker's trials): those must stay with it.
+    let _quick = worker(&dir, &ep, 1, 100, &[]);
+    let deadline = Instant::now() + TIMEOUT;
+    while records(&out)
+        .iter()
+        .filter(|r| matches!(r, Record::Outcome { .. }))
+        .count()
+        < 28
+    {
+        assert!(Instant::now() < deadline, "the quick worker stalled");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(!c.stderr().contains("lease expired") && !c.stderr().contains("worker gone"));
+    // SIGTERM: the slow worker gives back its two trials and exits, without
+    // waiting a minute for them.
+    let ok = Command::new("kill")
+        .args(["-TERM", &slow.child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(ok.success());
+    assert!(wait_exit(&mut slow).success());
+    let said = slow.stderr();
+    assert_eq!(
+        said.matches("trial started").count(),
+        2,
+        "never more than its slots: {said}"
+    );
+    assert!(
+        said.contains("0 trials run, 2 given back or failed, at most 2 held"),
+        "{said}"
+    );
+    assert!(wait_exit(&mut c).success());
+    let f = finished(&out);
+    assert_eq!(f["accepted"], 60, "{f}");
+    assert_eq!(f["failures"], 0, "given back is not failed: {f}");
+    assert_eq!(
+        f["redispatched"], 2,
+        "the two given back, and nothing for silence: {f}"
+    );
+}
