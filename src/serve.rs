@@ -136,7 +136,6 @@ pub fn service_config(job: &JobArgs, prefix: &str) -> ServiceConfig {
         prefix: prefix.to_string(),
         lease: Duration::from_secs_f64(job.lease_s),
         silence: Duration::from_secs_f64(job.silence_s),
-        ..ServiceConfig::default()
     }
 }
 
