@@ -174,6 +174,48 @@ pub enum BenchCommand {
     Sim(SimBenchArgs),
     /// The farm: trials/s and coordinator CPU per trial through real processes on loopback.
     Farm(FarmBenchArgs),
+    /// One fleet, many runs: utilisation, trials/s, shares by priority, coordinator CPU
+    /// per trial and dispatch latency through one `naofarm router` on loopback.
+    Fleet(FleetBenchArgs),
+}
+
+/// Arguments of `bench fleet`.
+#[derive(Args, Debug)]
+pub struct FleetBenchArgs {
+    /// Runs (each its own coordinator process).
+    #[arg(long, default_value_t = 20)]
+    pub runs: usize,
+    /// Worker processes.
+    #[arg(long, default_value_t = 100)]
+    pub workers: u32,
+    /// Slots per worker.
+    #[arg(long, default_value_t = 10)]
+    pub slots: u32,
+    /// Wall time of every (synthetic) trial, ms.
+    #[arg(long, default_value_t = 1000)]
+    pub trial_ms: u64,
+    /// Iterations per run.
+    #[arg(long, default_value_t = 60)]
+    pub iterations: u64,
+    /// Trials per iteration.
+    #[arg(long, default_value_t = 10)]
+    pub trials: u32,
+    /// Pipeline depth of every run.
+    #[arg(long, default_value_t = 8)]
+    pub depth: u32,
+    /// Priorities, given to the runs in turn.
+    #[arg(long, default_value = "1,2,3", value_delimiter = ',')]
+    pub priorities: Vec<u32>,
+    /// Where the runs' journals go (default /dev/shm when there is one: the
+    /// bench measures the farm, not the disk).
+    #[arg(long)]
+    pub dir: Option<std::path::PathBuf>,
+    /// Give up after this many seconds.
+    #[arg(long, default_value_t = 1800)]
+    pub timeout_s: u64,
+    /// Machine-readable output.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Arguments of `bench clop`.

@@ -88,6 +88,10 @@ pub struct Scheduler {
     hold: HashMap<TrialId, Instant>,
     /// Workers a trial's lease passed on: avoided for it like those that failed it.
     expired_on: HashMap<TrialId, BTreeSet<String>>,
+    /// When each queued trial became ready.
+    ready_since: HashMap<TrialId, Instant>,
+    /// Ready → taken, per trial taken since the last [`Scheduler::drain_latencies`].
+    latencies: Vec<Duration>,
 }
 
 impl Scheduler {
@@ -104,7 +108,14 @@ impl Scheduler {
             set_aside: BTreeSet::new(),
             hold: HashMap::new(),
             expired_on: HashMap::new(),
+            ready_since: HashMap::new(),
+            latencies: Vec::new(),
         }
+    }
+
+    /// How long each trial taken since the last call waited, ready → taken.
+    pub fn drain_latencies(&mut self) -> Vec<Duration> {
+        std::mem::take(&mut self.latencies)
     }
 
     /// A worker was heard from: its heartbeat (with its slots), or its
@@ -135,16 +146,17 @@ impl Scheduler {
             .collect()
     }
 
-    /// Queues a trial to run (again).
-    pub fn enqueue(&mut self, t: TrialId) {
-        if !self.inflight.contains_key(&t) {
-            self.queue.insert(t);
+    /// Queues a trial to run (again), ready from `now`.
+    pub fn enqueue(&mut self, t: TrialId, now: Instant) {
+        if !self.inflight.contains_key(&t) && self.queue.insert(t) {
+            self.ready_since.insert(t, now);
         }
     }
 
     /// The trial is done (decided or no longer wanted): off the queue and out of flight.
     pub fn forget(&mut self, t: TrialId) {
         self.queue.remove(&t);
+        self.ready_since.remove(&t);
         self.hold.remove(&t);
         self.expired_on.remove(&t);
         if let Some(f) = self.inflight.remove(&t) {
@@ -179,7 +191,7 @@ impl Scheduler {
     /// workers, or ones joining meanwhile, get it first).
     pub fn failed(&mut self, t: TrialId, now: Instant) {
         self.hold.insert(t, now + self.silence);
-        self.enqueue(t);
+        self.enqueue(t, now);
     }
 
     /// Sets a worker aside: it gets no more work.
@@ -258,6 +270,9 @@ impl Scheduler {
                 }
             }
             self.queue.remove(&t);
+            if let Some(since) = self.ready_since.remove(&t) {
+                self.latencies.push(now.saturating_duration_since(since));
+            }
             if let Some(w) = self.workers.get_mut(id) {
                 w.assigned.insert(t);
             }

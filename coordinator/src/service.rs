@@ -58,7 +58,7 @@ impl Default for ServiceConfig {
 }
 
 /// Counters of what the service saw.
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct Counters {
     /// Outcomes journaled.
     pub accepted: u64,
@@ -74,13 +74,36 @@ pub struct Counters {
     pub set_aside: Vec<String>,
     /// Refused messages per reason.
     pub refused_reasons: BTreeMap<String, u64>,
+    /// Ready → handed to a worker, ms, per trial (the first 100,000).
+    pub dispatch_ms: Vec<f32>,
+    /// Seconds spent applying outcomes to the run (journal, pickOut, CLOP's fit and draw).
+    pub decide_s: f64,
+}
+
+impl Counters {
+    /// The `q`-quantile (0..=1) of the dispatch latencies, ms.
+    #[must_use]
+    pub fn dispatch_quantile(&self, q: f64) -> Option<f64> {
+        let mut v = self.dispatch_ms.clone();
+        if v.is_empty() {
+            return None;
+        }
+        v.sort_by(f32::total_cmp);
+        #[allow(
+            clippy::cast_possible_truncation,
+            clippy::cast_sign_loss,
+            clippy::cast_precision_loss
+        )]
+        let i = ((v.len() - 1) as f64 * q.clamp(0.0, 1.0)).round() as usize;
+        v.get(i).map(|x| f64::from(*x))
+    }
 }
 
 /// A worker that failed this many trials which others then ran is set aside.
 pub const SET_ASIDE_AFTER: u32 = 3;
 
 /// How the service ended.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum Ended {
     /// Every iteration decided.
     Finished(Counters),
@@ -476,7 +499,7 @@ pub async fn serve(
                 for (trial, worker) in t.expired {
                     if st.run.is_pending(trial.0, trial.1) {
                         tracing::info!(iteration = trial.0, trial = trial.1, %worker, "lease expired; the trial is offered again");
-                        st.sched.enqueue(trial);
+                        st.sched.enqueue(trial, now);
                         st.counters.redispatched += 1;
                     }
                 }
@@ -501,7 +524,7 @@ pub async fn serve(
 pub const GONE_GRACE: Duration = Duration::from_millis(500);
 
 /// How often a run repeats its advert (workers forget a run not heard for three of these).
-pub const ADVERT_EVERY: Duration = Duration::from_millis(500);
+pub const ADVERT_EVERY: Duration = Duration::from_secs(1);
 
 /// Publishes the run's advert (workers choose runs by it).
 async fn advertise(session: &Session, st: &mut State) {
@@ -524,7 +547,7 @@ fn on_failure(st: &mut State, f: &TrialFailure) -> Result<(), ServiceError> {
             // Beyond its limits, or it is stopping: not the trial's failure.
             tracing::info!(worker = %f.worker, iteration = f.iteration, trial = f.trial, reason = %f.reason, "a worker gave a trial back");
             st.counters.redispatched += 1;
-            st.sched.enqueue(t);
+            st.sched.enqueue(t, Instant::now());
         }
         Answer::Held => {
             tracing::warn!(worker = %f.worker, iteration = f.iteration, trial = f.trial, reason = %f.reason, "a worker could not run a trial");
@@ -594,6 +617,12 @@ async fn on_work(st: &mut State, q: &zenoh::query::Query) {
                     st.sched.forget(t);
                 }
             }
+        }
+    }
+    for d in st.sched.drain_latencies() {
+        if st.counters.dispatch_ms.len() < 100_000 {
+            #[allow(clippy::cast_possible_truncation)]
+            st.counters.dispatch_ms.push((d.as_secs_f64() * 1000.0) as f32);
         }
     }
     if trials.len() < req.want as usize || st.sched.ready() == 0 {
@@ -739,10 +768,12 @@ async fn on_outcome(
         return Ok(());
     }
 
-    match st
+    let clock = std::time::Instant::now();
+    let applied = st
         .run
-        .on_outcome(o.iteration, o.trial, o.seed, o.measurement(), &o.worker)
-    {
+        .on_outcome(o.iteration, o.trial, o.seed, o.measurement(), &o.worker);
+    st.counters.decide_s += clock.elapsed().as_secs_f64();
+    match applied {
         Ok((crate::evolve::Counted::Duplicate, _)) => {
             st.counters.duplicates += 1;
             tracing::debug!(
@@ -784,7 +815,7 @@ async fn handle_effects(
         match e {
             Effect::Dispatch(o, ks) => {
                 for k in ks {
-                    st.sched.enqueue((o.iteration, k));
+                    st.sched.enqueue((o.iteration, k), Instant::now());
                 }
                 let ev = st.run.evolve();
                 let json = serde_json::json!({

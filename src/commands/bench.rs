@@ -27,6 +27,7 @@ pub fn bench(cmd: BenchCommand) -> Result<(), Failure> {
         BenchCommand::Clop(a) => clop(&a),
         BenchCommand::Sim(a) => bench_sim(&a),
         BenchCommand::Farm(a) => farm(&a),
+        BenchCommand::Fleet(a) => crate::commands::bench_fleet::fleet(&a),
     }
 }
 

@@ -2,6 +2,7 @@
 //! the crates.
 
 pub mod bench;
+pub mod bench_fleet;
 pub mod check;
 pub mod clop;
 pub mod coordinator;

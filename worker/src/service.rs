@@ -231,6 +231,10 @@ pub async fn serve(
     let mut beat = tokio::time::interval(cfg.heartbeat);
     beat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let version = env!("CARGO_PKG_VERSION").to_string();
+    // When this worker last said anything to each run (a request, an
+    // outcome): a heartbeat goes only to runs it holds trials of and has not
+    // spoken to within a heartbeat.
+    let mut spoke: BTreeMap<String, Instant> = BTreeMap::new();
     loop {
         tokio::select! {
             s = adverts.recv_async() => {
@@ -296,6 +300,7 @@ pub async fn serve(
                             let mut o = TrialOutcome::answer(&req, id.clone(), m, wall);
                             crate::fault::tamper(&mut o);
                             put_message(&session, &fkeys.outcomes(), &o).await;
+                            spoke.insert(req.run.clone(), Instant::now());
                             summary.trials += 1;
                         }
                         Err(reason) => {
@@ -315,9 +320,15 @@ pub async fn serve(
                     busy: u32::try_from(held.len()).unwrap_or(u32::MAX).min(cfg.slots),
                     version: version.clone(),
                 };
-                for run in runs {
+                let quiet: Vec<&String> = runs
+                    .into_iter()
+                    .filter(|r| spoke.get(*r).is_none_or(|t| t.elapsed() >= cfg.heartbeat))
+                    .collect();
+                for run in quiet {
                     put_message(&session, &FleetKeys::new(&prefix, run).presence(), &p).await;
+                    spoke.insert(run.clone(), Instant::now());
                 }
+                spoke.retain(|r, _| held.keys().any(|(h, _, _)| h == r));
             }
             _ = shutdown.changed() => {
                 if *shutdown.borrow() {
@@ -340,6 +351,7 @@ pub async fn serve(
                     version: version.clone(),
                 };
                 let key = FleetKeys::new(&prefix, &run).work();
+                spoke.insert(run.clone(), Instant::now());
                 let session = session.clone();
                 let tx = tx.clone();
                 tokio::spawn(async move {

@@ -21,7 +21,7 @@ use protocol::wire::{RunAdvert, RunState};
 use tokio::time::Instant;
 
 /// A run whose adverts stop for this long is forgotten (its coordinator went).
-pub const FORGET_AFTER: Duration = Duration::from_millis(1500);
+pub const FORGET_AFTER: Duration = Duration::from_millis(3500);
 
 #[derive(Debug, Clone)]
 struct RunInfo {

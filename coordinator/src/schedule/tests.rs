@@ -44,7 +44,7 @@ fn answer(s: &mut Scheduler, t: TrialId, who: &str) -> bool {
 #[tokio::test(start_paused = true)]
 async fn a_passed_lease_sends_the_trial_back_and_it_is_taken_again() {
     let mut s = sched();
-    s.enqueue((0, 0));
+    s.enqueue((0, 0), Instant::now());
     assert_eq!(take(&mut s, "a", 1, &none), [(0, 0)]);
     advance(LEASE - Duration::from_millis(1)).await;
     s.worker_seen("a", Some(1), Instant::now());
@@ -55,7 +55,7 @@ async fn a_passed_lease_sends_the_trial_back_and_it_is_taken_again() {
     assert_eq!(t.expired, [((0, 0), "a".to_string())]);
     assert!(t.silent.is_empty());
     assert_eq!(s.holder((0, 0)), None);
-    s.enqueue((0, 0));
+    s.enqueue((0, 0), Instant::now());
     assert!(
         take(&mut s, "a", 1, &none).is_empty(),
         "not to the worker it expired on while another lives"
@@ -68,9 +68,9 @@ async fn a_passed_lease_sends_the_trial_back_and_it_is_taken_again() {
 #[tokio::test(start_paused = true)]
 async fn a_silent_worker_is_swept_after_four_silences_with_its_trials() {
     let mut s = sched();
-    s.enqueue((1, 0));
-    s.enqueue((1, 1));
-    s.enqueue((1, 2));
+    s.enqueue((1, 0), Instant::now());
+    s.enqueue((1, 1), Instant::now());
+    s.enqueue((1, 2), Instant::now());
     assert_eq!(take(&mut s, "a", 2, &none).len(), 2);
     advance(SILENCE * 4).await;
     assert!(s.tick(Instant::now()).silent.is_empty(), "not swept yet");
@@ -97,7 +97,7 @@ async fn a_silent_worker_is_swept_after_four_silences_with_its_trials() {
 async fn a_worker_never_holds_more_than_its_slots() {
     let mut s = sched();
     for k in 0..10 {
-        s.enqueue((0, k));
+        s.enqueue((0, k), Instant::now());
     }
     assert_eq!(take(&mut s, "a", 2, &none).len(), 2);
     assert_eq!(take(&mut s, "a", 2, &none).len(), 0, "full");
@@ -132,8 +132,8 @@ async fn a_failed_trial_waits_for_another_worker_while_one_lives() {
     };
     let mut s = sched();
     s.worker_seen("a", Some(1), Instant::now());
-    s.enqueue((0, 0));
-    s.enqueue((0, 1));
+    s.enqueue((0, 0), Instant::now());
+    s.enqueue((0, 1), Instant::now());
     assert_eq!(
         take(&mut s, "b", 1, &failed_on_b),
         [(0, 1)],
@@ -154,7 +154,7 @@ async fn a_failed_trial_waits_for_another_worker_while_one_lives() {
 async fn a_set_aside_worker_gets_nothing() {
     let mut s = sched();
     s.set_aside("a");
-    s.enqueue((0, 0));
+    s.enqueue((0, 0), Instant::now());
     assert!(take(&mut s, "a", 4, &none).is_empty());
     assert!(s.is_queued((0, 0)));
     assert_eq!(take(&mut s, "b", 1, &none), [(0, 0)]);
@@ -166,7 +166,7 @@ async fn a_set_aside_worker_gets_nothing() {
 async fn only_the_dispatch_in_flight_from_its_worker_answers() {
     let mut s = sched();
     s.worker_seen("b", Some(1), Instant::now());
-    s.enqueue((0, 0));
+    s.enqueue((0, 0), Instant::now());
     let d = s.take("a", 1, 1, Instant::now(), &none, &mut || 0xfeed);
     assert_eq!(d, [((0, 0), 0xfeed)]);
     assert_eq!(

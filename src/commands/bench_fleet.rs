@@ -1,0 +1,349 @@
+//! `naofarm bench fleet`: R runs × W worker processes × S slots through one
+//! `naofarm router` on loopback, synthetic trials of a fixed wall time. It
+//! prints the fleet's utilisation, trials/s, each run's share against its
+//! priority, the coordinators' CPU per trial (their own CPU clocks) and the
+//! dispatch latency (ready → handed to a worker).
+//!
+//! The shares and the utilisation are measured while every run still has
+//! trials ready: from when the last coordinator started (plus a warm-up of
+//! two trial times) until the first run finishes.
+
+use std::{
+    io::{BufRead, BufReader},
+    process::{Child, Command, Stdio},
+    sync::{mpsc, Arc, Mutex},
+    time::{Duration, Instant},
+};
+
+use anyhow::{anyhow, Context};
+use zenoh::Wait;
+
+use crate::{args::FleetBenchArgs, common::Failure};
+
+/// Kills the bench's processes however it ends.
+struct Procs(Vec<Child>);
+
+impl Drop for Procs {
+    fn drop(&mut self) {
+        for c in &mut self.0 {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+fn experiment(i: usize, a: &FleetBenchArgs) -> String {
+    format!(
+        "name = \"fleet-{i}\"\nseed = {}\niterations = {}\ntrials_per_iteration = {}\n\
+         pipeline_depth = {}\nmodel = \"synthetic\"\nstart = \"expert\"\n\n\
+         [[parameter]]\nname = \"ThighRelHip2_Z\"\nlower = -0.08\nupper = -0.03\nexpert = -0.04\n\n\
+         [[parameter]]\nname = \"xlength_step_max\"\nlower = 0.02\nupper = 0.15\nexpert = 0.08\n\n\
+         [clop]\nn_mcmc = 100\n",
+        i + 1,
+        a.iterations,
+        a.trials,
+        a.depth
+    )
+}
+
+/// Starts `naofarm router` on a free loopback port; its endpoint as it reports it.
+fn router(exe: &std::path::Path, procs: &mut Procs) -> anyhow::Result<String> {
+    let mut child = Command::new(exe)
+        .args(["router", "--listen", "tcp/127.0.0.1:0"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()?;
+    let err = child.stderr.take().context("router stderr")?;
+    procs.0.push(child);
+    for line in BufReader::new(err).lines() {
+        let line = line?;
+        if let Some(ep) = line.strip_prefix("router listening on ") {
+            return Ok(ep.trim().to_string());
+        }
+    }
+    Err(anyhow!("the router ended without saying where it listens"))
+}
+
+/// One received trial outcome: when, which run, how long it ran.
+type Seen = (Instant, String, f64);
+
+#[derive(Debug, serde::Serialize)]
+struct RunRow {
+    name: String,
+    priority: u32,
+    share: f64,
+    priority_share: f64,
+    trials: u64,
+    cpu_s: f64,
+    dispatch_ms_p50: Option<f64>,
+    dispatch_ms_p99: Option<f64>,
+}
+
+#[derive(Debug, serde::Serialize)]
+struct Report {
+    runs: usize,
+    workers: u32,
+    slots: u32,
+    trial_ms: u64,
+    window_s: f64,
+    utilisation: f64,
+    trials_per_s: f64,
+    coordinator_cpu_ms_per_trial: f64,
+    decide_ms_per_decision: f64,
+    dispatch_ms_p50: f64,
+    dispatch_ms_p99: f64,
+    worst_share_error: f64,
+    per_run: Vec<RunRow>,
+}
+
+/// `naofarm bench fleet`.
+#[allow(clippy::too_many_lines, clippy::cast_precision_loss)]
+pub fn fleet(a: &FleetBenchArgs) -> Result<(), Failure> {
+    if a.runs == 0 || a.runs > 200 || a.workers == 0 || a.workers > 1000 {
+        return Err(Failure::Usage(anyhow!(
+            "--runs must be in 1..=200 and --workers in 1..=1000"
+        )));
+    }
+    if a.slots == 0 || a.slots > 256 || a.trial_ms == 0 || a.trial_ms > 60_000 {
+        return Err(Failure::Usage(anyhow!(
+            "--slots must be in 1..=256 and --trial-ms in 1..=60000"
+        )));
+    }
+    if a.priorities.is_empty() || a.priorities.iter().any(|&p| p == 0 || p > 1000) {
+        return Err(Failure::Usage(anyhow!(
+            "--priorities: each in 1..=1000"
+        )));
+    }
+    if a.iterations == 0 || a.trials == 0 || a.depth == 0 {
+        return Err(Failure::Usage(anyhow!(
+            "--iterations, --trials and --depth must be at least 1"
+        )));
+    }
+    run(a).map_err(Failure::Job)
+}
+
+#[allow(clippy::too_many_lines, clippy::cast_precision_loss)]
+fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
+    let exe = std::env::current_exe()?;
+    let base = a.dir.clone().unwrap_or_else(|| {
+        let shm = std::path::Path::new("/dev/shm");
+        if shm.is_dir() {
+            shm.to_path_buf()
+        } else {
+            std::env::temp_dir()
+        }
+    });
+    let dir = base.join(format!("naofarm-bench-fleet-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir)?;
+    eprintln!("journals in {}", dir.display());
+    let mut procs = Procs(Vec::new());
+    let ep = router(&exe, &mut procs)?;
+    eprintln!("router on {ep}; starting {} workers × {} slots…", a.workers, a.slots);
+    for _ in 0..a.workers {
+        procs.0.push(
+            Command::new(&exe)
+                .args(["worker", "--connect", &ep, "--slots", &a.slots.to_string()])
+                .args(["--min-trial-ms", &a.trial_ms.to_string()])
+                .args(["--heartbeat-ms", "1000", "--models", "synthetic"])
+                .env("RUST_LOG", "error")
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()?,
+        );
+    }
+    // Every trial outcome the coordinators publish, timestamped here.
+    let mut zcfg = zenoh::Config::default();
+    for (k, v) in [
+        ("mode", "\"client\"".to_string()),
+        ("scouting/multicast/enabled", "false".to_string()),
+        ("connect/endpoints", format!("[\"{ep}\"]")),
+    ] {
+        zcfg.insert_json5(k, &v).map_err(|e| anyhow!("{e}"))?;
+    }
+    let session = zenoh::open(zcfg).wait().map_err(|e| anyhow!("zenoh: {e}"))?;
+    let seen: Arc<Mutex<Vec<Seen>>> = Arc::new(Mutex::new(Vec::new()));
+    let sink = seen.clone();
+    let _sub = session
+        .declare_subscriber("naofarm/*/*/trials/**")
+        .callback(move |s| {
+            let v: serde_json::Value =
+                serde_json::from_slice(&s.payload().to_bytes()).unwrap_or_default();
+            if let (Some(run), Some(w)) = (v["run"].as_str(), v["wall_time_s"].as_f64()) {
+                if let Ok(mut g) = sink.lock() {
+                    g.push((Instant::now(), run.to_string(), w));
+                }
+            }
+        })
+        .wait()
+        .map_err(|e| anyhow!("zenoh: {e}"))?;
+
+    let mut coords = Vec::new();
+    let (tx, rx) = mpsc::channel::<(usize, serde_json::Value)>();
+    for i in 0..a.runs {
+        let exp = dir.join(format!("fleet-{i}.toml"));
+        std::fs::write(&exp, experiment(i, a))?;
+        let priority = a.priorities[i % a.priorities.len()];
+        let mut child = Command::new(&exe)
+            .arg("coordinator")
+            .arg(&exp)
+            .arg("--out")
+            .arg(dir.join(format!("run-{i}")))
+            .args(["--connect", &ep, "--json", "--priority", &priority.to_string()])
+            .env("RUST_LOG", "error")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()?;
+        let out = child.stdout.take().context("coordinator stdout")?;
+        let tx = tx.clone();
+        std::thread::spawn(move || {
+            for line in BufReader::new(out).lines().map_while(Result::ok) {
+                if let Ok(v) = serde_json::from_str::<serde_json::Value>(&line) {
+                    if v["event"] == "finished" {
+                        let _ = tx.send((i, v));
+                    }
+                }
+            }
+        });
+        coords.push((child, priority));
+    }
+    let started = Instant::now();
+    drop(tx);
+    eprintln!("{} runs started; waiting for them to finish…", a.runs);
+    let mut finished: Vec<Option<serde_json::Value>> = vec![None; a.runs];
+    let mut first_done = None;
+    let deadline = started + Duration::from_secs(a.timeout_s);
+    while finished.iter().any(Option::is_none) {
+        let left = deadline.saturating_duration_since(Instant::now());
+        match rx.recv_timeout(left) {
+            Ok((i, v)) => {
+                first_done.get_or_insert_with(Instant::now);
+                finished[i] = Some(v);
+            }
+            Err(_) => return Err(anyhow!("the runs did not finish within {} s", a.timeout_s)),
+        }
+    }
+    for (c, _) in &mut coords {
+        let _ = c.wait();
+    }
+    drop(procs);
+    let _ = session.close().wait();
+    let from = started + Duration::from_millis(2 * a.trial_ms);
+    let to = first_done.unwrap_or_else(Instant::now);
+    let window = to.saturating_duration_since(from).as_secs_f64();
+    if window <= 0.0 {
+        return Err(anyhow!(
+            "a run finished before the warm-up ended: give more --iterations"
+        ));
+    }
+    let seen = seen.lock().map_err(|_| anyhow!("poisoned"))?.clone();
+    let ids: Vec<String> = finished
+        .iter()
+        .map(|f| {
+            f.as_ref()
+                .and_then(|v| v["status"]["id"].as_str())
+                .unwrap_or_default()
+                .to_string()
+        })
+        .collect();
+    let in_window: Vec<&Seen> = seen.iter().filter(|(t, _, _)| *t >= from && *t < to).collect();
+    let busy: f64 = in_window.iter().map(|(_, _, w)| w).sum();
+    let slot_s = f64::from(a.workers) * f64::from(a.slots) * window;
+    let psum: f64 = coords.iter().map(|(_, p)| f64::from(*p)).sum();
+    let mut per_run = Vec::new();
+    let (mut cpu, mut trials, mut decide_s, mut decisions) = (0.0, 0u64, 0.0, 0u64);
+    let (mut p50s, mut p99) = (Vec::new(), 0.0f64);
+    for (i, f) in finished.iter().enumerate() {
+        let f = f.as_ref().context("a run without a final line")?;
+        let mine: f64 = in_window
+            .iter()
+            .filter(|(_, r, _)| *r == ids[i])
+            .map(|(_, _, w)| w)
+            .sum();
+        let c = f["cpu_s"].as_f64().unwrap_or(0.0);
+        let n = f["accepted"].as_u64().unwrap_or(0);
+        cpu += c;
+        trials += n;
+        decide_s += f["decide_s"].as_f64().unwrap_or(0.0);
+        decisions += f["status"]["decided"].as_u64().unwrap_or(0);
+        if let Some(x) = f["dispatch_ms_p50"].as_f64() {
+            p50s.push(x);
+        }
+        p99 = p99.max(f["dispatch_ms_p99"].as_f64().unwrap_or(0.0));
+        per_run.push(RunRow {
+            name: format!("fleet-{i}"),
+            priority: coords[i].1,
+            share: if busy > 0.0 { mine / busy } else { 0.0 },
+            priority_share: f64::from(coords[i].1) / psum,
+            trials: n,
+            cpu_s: c,
+            dispatch_ms_p50: f["dispatch_ms_p50"].as_f64(),
+            dispatch_ms_p99: f["dispatch_ms_p99"].as_f64(),
+        });
+    }
+    p50s.sort_by(f64::total_cmp);
+    let worst = per_run
+        .iter()
+        .map(|r| (r.share / r.priority_share - 1.0).abs())
+        .fold(0.0, f64::max);
+    let report = Report {
+        runs: a.runs,
+        workers: a.workers,
+        slots: a.slots,
+        trial_ms: a.trial_ms,
+        window_s: window,
+        utilisation: busy / slot_s,
+        trials_per_s: in_window.len() as f64 / window,
+        coordinator_cpu_ms_per_trial: if trials > 0 { cpu / trials as f64 * 1e3 } else { 0.0 },
+        decide_ms_per_decision: if decisions > 0 {
+            decide_s / decisions as f64 * 1e3
+        } else {
+            0.0
+        },
+        dispatch_ms_p50: p50s.get(p50s.len() / 2).copied().unwrap_or(0.0),
+        dispatch_ms_p99: p99,
+        worst_share_error: worst,
+        per_run,
+    };
+    let _ = std::fs::remove_dir_all(&dir);
+    if a.json {
+        crate::common::emit(&format!("{}\n", serde_json::to_string_pretty(&report)?))
+            .map_err(|_| anyhow!("output"))?;
+        return Ok(());
+    }
+    let mut out = format!(
+        "{} runs × {} workers × {} slots, trials of {} ms; window {:.1} s (every run with trials ready)\n\
+         utilisation {:.1} %   {:.1} trials/s   coordinator CPU {:.3} ms/trial   \
+         run+CLOP {:.2} ms/decision   dispatch latency p50 {:.1} ms, p99 {:.1} ms\n\
+         worst share error {:.1} % of the priority's share\n",
+        report.runs,
+        report.workers,
+        report.slots,
+        report.trial_ms,
+        report.window_s,
+        report.utilisation * 100.0,
+        report.trials_per_s,
+        report.coordinator_cpu_ms_per_trial,
+        report.decide_ms_per_decision,
+        report.dispatch_ms_p50,
+        report.dispatch_ms_p99,
+        report.worst_share_error * 100.0
+    );
+    out += &format!(
+        "{:<10} {:>8} {:>8} {:>10} {:>8} {:>8}\n",
+        "run", "priority", "share", "its share", "trials", "CPU s"
+    );
+    for r in &report.per_run {
+        out += &format!(
+            "{:<10} {:>8} {:>7.1}% {:>9.1}% {:>8} {:>8.2}\n",
+            r.name,
+            r.priority,
+            r.share * 100.0,
+            r.priority_share * 100.0,
+            r.trials,
+            r.cpu_s
+        );
+    }
+    crate::common::emit(&out).map_err(|_| anyhow!("output"))?;
+    Ok(())
+}
