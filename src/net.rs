@@ -74,12 +74,6 @@ impl NetArgs {
     }
 }
 
-/// A free TCP port on 127.0.0.1 (for the embedded run's loopback endpoint).
-pub fn free_loopback_port() -> anyhow::Result<u16> {
-    let l = std::net::TcpListener::bind("127.0.0.1:0").context("bind 127.0.0.1:0")?;
-    Ok(l.local_addr()?.port())
-}
-
 /// Opens a zenoh session (the one place every command does).
 pub async fn open_session(cfg: zenoh::Config) -> Result<zenoh::Session, crate::common::Failure> {
     zenoh::open(cfg)

@@ -30,23 +30,23 @@ fn experiment(dir: &Path, iterations: u64) -> PathBuf {
     p
 }
 
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
 struct Coordinator {
     child: Child,
     stderr: PathBuf,
     lines: mpsc::Receiver<String>,
     seen: Vec<String>,
+    /// The port it listens on, as it says itself.
+    port: u16,
 }
 
 impl Coordinator {
-    fn start(exp: &Path, out: &Path, port: u16, lease_s: f64) -> Self {
+    /// A coordinator listening on a port the OS picks (read from its own report).
+    fn start(exp: &Path, out: &Path, lease_s: f64) -> Self {
+        Self::start_on(exp, out, 0, lease_s)
+    }
+
+    /// A coordinator listening on `port` (0: the OS picks).
+    fn start_on(exp: &Path, out: &Path, port: u16, lease_s: f64) -> Self {
         let stderr = out.with_extension("stderr");
         let mut child = naofarm()
             .args(["coordinator", "--json", "--lease-s", &lease_s.to_string()])
@@ -68,11 +68,29 @@ impl Coordinator {
                 }
             }
         });
+        // Its own words: "coordinator listening on tcp/127.0.0.1:PORT".
+        let deadline = Instant::now() + TIMEOUT;
+        let port = loop {
+            let text = std::fs::read_to_string(&stderr).unwrap_or_default();
+            if let Some(p) = text
+                .lines()
+                .find_map(|l| l.strip_prefix("coordinator listening on tcp/127.0.0.1:"))
+                .and_then(|p| p.trim().parse().ok())
+            {
+                break p;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "the coordinator never said where it listens: {text}"
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        };
         Self {
             child,
             stderr,
             lines,
             seen: Vec::new(),
+            port,
         }
     }
 
@@ -254,11 +272,9 @@ fn signal(child: &Child, sig: &str) {
 fn farm_run(name: &str, n: usize, iterations: u64) -> PathBuf {
     let dir = scratch(name);
     let exp = experiment(&dir, iterations);
-    let port = free_port();
     let out = dir.join("run");
-    // Workers first: they keep trying to connect until the coordinator listens.
-    let mut ws: Vec<Proc> = (0..n).map(|_| worker(port, 2, 15)).collect();
-    let mut c = Coordinator::start(&exp, &out, port, 30.0);
+    let mut c = Coordinator::start(&exp, &out, 30.0);
+    let mut ws: Vec<Proc> = (0..n).map(|_| worker(c.port, 2, 15)).collect();
     let status = c.wait_exit();
     kill_all(&mut ws);
     assert!(status.success(), "coordinator: {status}; {:?}", c.seen);
@@ -290,9 +306,9 @@ fn one_worker_and_three_workers_give_bit_identical_histories() {
 fn a_killed_worker_loses_no_trial() {
     let dir = scratch("sigkill");
     let exp = experiment(&dir, 20);
-    let port = free_port();
     let out = dir.join("run");
-    let mut c = Coordinator::start(&exp, &out, port, 30.0);
+    let mut c = Coordinator::start(&exp, &out, 30.0);
+    let port = c.port;
     // Two quick workers and a slow one, killed while it holds a trial.
     let mut ws: Vec<Proc> = (0..2).map(|_| worker(port, 2, 20)).collect();
     c.wait_decided(3);
@@ -346,9 +362,9 @@ fn a_killed_worker_loses_no_trial() {
 fn a_frozen_worker_is_replaced_and_its_late_outcomes_ignored() {
     let dir = scratch("sigstop");
     let exp = experiment(&dir, 24);
-    let port = free_port();
     let out = dir.join("run");
-    let mut c = Coordinator::start(&exp, &out, port, 1.0);
+    let mut c = Coordinator::start(&exp, &out, 1.0);
+    let port = c.port;
     // Two quick workers and a slower one, frozen while it holds a trial.
     let mut ws: Vec<Proc> = (0..2).map(|_| worker(port, 2, 20)).collect();
     c.wait_decided(2);
@@ -382,17 +398,23 @@ fn a_killed_coordinator_resumes_to_the_same_history() {
     let reference = decided(&journal(&farm_run("resume-ref", 2, 20)));
     let dir = scratch("resume");
     let exp = experiment(&dir, 20);
-    let port = free_port();
     let out = dir.join("run");
-    let mut ws: Vec<Proc> = (0..2).map(|_| worker(port, 2, 10)).collect();
+    // The first coordinator picks the port; the restarts take the same one,
+    // which the workers keep connecting to.
+    let mut port = 0;
+    let mut ws: Vec<Proc> = Vec::new();
     // SIGKILL at several points: after 3 new decisions, 6 more, 5 more.
     for n in [3, 6, 5] {
-        let mut c = Coordinator::start(&exp, &out, port, 30.0);
+        let mut c = Coordinator::start_on(&exp, &out, port, 30.0);
+        if port == 0 {
+            port = c.port;
+            ws = (0..2).map(|_| worker(port, 2, 10)).collect();
+        }
         c.wait_decided(n);
         c.child.kill().unwrap();
         let _ = c.child.wait();
     }
-    let mut c = Coordinator::start(&exp, &out, port, 30.0);
+    let mut c = Coordinator::start_on(&exp, &out, port, 30.0);
     let status = c.wait_exit();
     kill_all(&mut ws);
     assert!(status.success(), "{:?}", c.seen);
@@ -438,11 +460,11 @@ fn failing_forging_and_misaddressing_workers_never_reach_the_journal() {
             Some("trial not in flight"),
         ),
     ] {
-        let port = free_port();
         let out = dir.join(mode);
         // The bad worker alone first, until the coordinator has answered it;
         // then the good ones.
-        let mut c = Coordinator::start(&exp, &out, port, 1.0);
+        let mut c = Coordinator::start(&exp, &out, 1.0);
+        let port = c.port;
         let mut bad = worker_with(port, 2, 5, Some((var, mode)));
         c.wait_log(seen);
         let mut ws = vec![worker(port, 1, 20), worker(port, 1, 20)];
@@ -500,9 +522,9 @@ fn failing_forging_and_misaddressing_workers_never_reach_the_journal() {
 fn a_second_coordinator_on_a_run_directory_exits_2_while_the_first_finishes() {
     let dir = scratch("two-coordinators");
     let exp = experiment(&dir, 8);
-    let port = free_port();
     let out = dir.join("run");
-    let mut c = Coordinator::start(&exp, &out, port, 30.0);
+    let mut c = Coordinator::start(&exp, &out, 30.0);
+    let port = c.port;
     // No worker yet: the first coordinator holds the run and waits for one.
     let deadline = Instant::now() + TIMEOUT;
     let holder = format!("pid {}", c.child.id());
@@ -518,7 +540,7 @@ fn a_second_coordinator_on_a_run_directory_exits_2_while_the_first_finishes() {
         .arg(&exp)
         .arg("--out")
         .arg(&out)
-        .args(["--listen", &format!("tcp/127.0.0.1:{}", free_port())])
+        .args(["--listen", "tcp/127.0.0.1:0"])
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&second.stderr);
@@ -535,9 +557,9 @@ fn a_second_coordinator_on_a_run_directory_exits_2_while_the_first_finishes() {
 fn a_worker_that_joins_mid_run_gets_work() {
     let dir = scratch("join");
     let exp = experiment(&dir, 16);
-    let port = free_port();
     let out = dir.join("run");
-    let mut c = Coordinator::start(&exp, &out, port, 30.0);
+    let mut c = Coordinator::start(&exp, &out, 30.0);
+    let port = c.port;
     let mut ws = vec![worker(port, 1, 25)];
     c.wait_decided(3);
     // Read only: the coordinator holds the run and may be writing its tail.
@@ -675,9 +697,9 @@ fn every_topic_matches_the_readme_field_tables() {
     }
     let dir = scratch("schema");
     let exp = experiment(&dir, 8);
-    let port = free_port();
     let out = dir.join("run");
-    let mut c = Coordinator::start(&exp, &out, port, 30.0);
+    let mut c = Coordinator::start(&exp, &out, 30.0);
+    let port = c.port;
     let session = session_to(port);
     let (tx, rx) = mpsc::channel();
     let _sub = session
@@ -765,9 +787,9 @@ fn every_topic_matches_the_readme_field_tables() {
 fn a_late_watcher_gets_the_history_then_every_later_iteration_once() {
     let dir = scratch("watch");
     let exp = experiment(&dir, 14);
-    let port = free_port();
     let out = dir.join("run");
-    let mut c = Coordinator::start(&exp, &out, port, 30.0);
+    let mut c = Coordinator::start(&exp, &out, 30.0);
+    let port = c.port;
     let mut ws = vec![worker(port, 2, 40)];
     c.wait_decided(4);
     let watcher = naofarm()
@@ -823,9 +845,9 @@ fn a_late_watcher_gets_the_history_then_every_later_iteration_once() {
 fn watching_an_unknown_run_says_so() {
     let dir = scratch("watch-unknown");
     let exp = experiment(&dir, 3);
-    let port = free_port();
     let out = dir.join("run");
-    let mut c = Coordinator::start(&exp, &out, port, 30.0);
+    let mut c = Coordinator::start(&exp, &out, 30.0);
+    let port = c.port;
     let unknown = naofarm()
         .args(["watch", "nosuchrun", "--timeout-s", "3", "--connect"])
         .arg(format!("tcp/127.0.0.1:{port}"))
@@ -862,10 +884,10 @@ fn bad_messages_are_counted_and_change_nothing() {
     use zenoh::Wait;
     let dir = scratch("garbage");
     let exp = experiment(&dir, 10);
-    let port = free_port();
     let out = dir.join("run");
     // No worker yet: the coordinator cannot finish before the garbage is in.
-    let mut c = Coordinator::start(&exp, &out, port, 30.0);
+    let mut c = Coordinator::start(&exp, &out, 30.0);
+    let port = c.port;
     let session = session_to(port);
     // Wait until the coordinator is reachable (its status answers): by then
     // its subscriptions are known to this session and puts are routed.

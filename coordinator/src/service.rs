@@ -622,7 +622,9 @@ async fn on_work(st: &mut State, q: &zenoh::query::Query) {
     for d in st.sched.drain_latencies() {
         if st.counters.dispatch_ms.len() < 100_000 {
             #[allow(clippy::cast_possible_truncation)]
-            st.counters.dispatch_ms.push((d.as_secs_f64() * 1000.0) as f32);
+            st.counters
+                .dispatch_ms
+                .push((d.as_secs_f64() * 1000.0) as f32);
         }
     }
     if trials.len() < req.want as usize || st.sched.ready() == 0 {

@@ -139,15 +139,44 @@ fn farm_case(
     workers: u32,
     iterations: u64,
 ) -> anyhow::Result<FarmRow> {
+    use std::io::{BufRead, BufReader, Read};
     use std::process::{Command, Stdio};
     let exe = std::env::current_exe()?;
-    let port = crate::net::free_loopback_port()?;
-    let endpoint = format!("tcp/127.0.0.1:{port}");
     let out = std::env::temp_dir().join(format!(
         "naofarm-bench-farm-{}-{model}-{workers}",
         std::process::id()
     ));
     let _ = std::fs::remove_dir_all(&out);
+    let started = std::time::Instant::now();
+    // The coordinator listens on a port the OS picks and says which.
+    let mut coordinator = Command::new(&exe)
+        .arg("coordinator")
+        .arg(experiment)
+        .arg("--out")
+        .arg(&out)
+        .args(["--json", "--model", model, "--listen", "tcp/127.0.0.1:0"])
+        .args(["--iterations", &iterations.to_string()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()?;
+    let mut err = BufReader::new(coordinator.stderr.take().ok_or_else(|| anyhow!("stderr"))?);
+    let mut said = String::new();
+    let endpoint = loop {
+        let mut line = String::new();
+        if err.read_line(&mut line)? == 0 {
+            let _ = coordinator.wait();
+            return Err(anyhow!("the coordinator failed before listening: {said}"));
+        }
+        if let Some(ep) = line.strip_prefix("coordinator listening on ") {
+            break ep.trim().to_string();
+        }
+        said += &line;
+    };
+    let rest = std::thread::spawn(move || {
+        let mut text = String::new();
+        let _ = err.read_to_string(&mut text);
+        text
+    });
     let mut pool = Workers(Vec::new());
     for _ in 0..workers {
         pool.0.push(
@@ -158,26 +187,20 @@ fn farm_case(
                 .spawn()?,
         );
     }
-    let started = std::time::Instant::now();
-    let done = Command::new(&exe)
-        .arg("coordinator")
-        .arg(experiment)
-        .arg("--out")
-        .arg(&out)
-        .args(["--json", "--model", model, "--listen", &endpoint])
-        .args(["--iterations", &iterations.to_string()])
-        .output()?;
+    let mut stdout = String::new();
+    if let Some(mut o) = coordinator.stdout.take() {
+        o.read_to_string(&mut stdout)?;
+    }
+    let status = coordinator.wait()?;
     let wall_s = started.elapsed().as_secs_f64();
     drop(pool);
     let _ = std::fs::remove_dir_all(&out);
-    if !done.status.success() {
+    if !status.success() {
         return Err(anyhow!(
-            "the coordinator failed ({}): {}",
-            done.status,
-            String::from_utf8_lossy(&done.stderr)
+            "the coordinator failed ({status}): {said}{}",
+            rest.join().unwrap_or_default()
         ));
     }
-    let stdout = String::from_utf8_lossy(&done.stdout);
     let finished: serde_json::Value = stdout
         .lines()
         .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())

@@ -110,9 +110,7 @@ pub fn fleet(a: &FleetBenchArgs) -> Result<(), Failure> {
         )));
     }
     if a.priorities.is_empty() || a.priorities.iter().any(|&p| p == 0 || p > 1000) {
-        return Err(Failure::Usage(anyhow!(
-            "--priorities: each in 1..=1000"
-        )));
+        return Err(Failure::Usage(anyhow!("--priorities: each in 1..=1000")));
     }
     if a.iterations == 0 || a.trials == 0 || a.depth == 0 {
         return Err(Failure::Usage(anyhow!(
@@ -139,7 +137,10 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
     eprintln!("journals in {}", dir.display());
     let mut procs = Procs(Vec::new());
     let ep = router(&exe, &mut procs)?;
-    eprintln!("router on {ep}; starting {} workers × {} slots…", a.workers, a.slots);
+    eprintln!(
+        "router on {ep}; starting {} workers × {} slots…",
+        a.workers, a.slots
+    );
     for _ in 0..a.workers {
         procs.0.push(
             Command::new(&exe)
@@ -161,7 +162,9 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
     ] {
         zcfg.insert_json5(k, &v).map_err(|e| anyhow!("{e}"))?;
     }
-    let session = zenoh::open(zcfg).wait().map_err(|e| anyhow!("zenoh: {e}"))?;
+    let session = zenoh::open(zcfg)
+        .wait()
+        .map_err(|e| anyhow!("zenoh: {e}"))?;
     let seen: Arc<Mutex<Vec<Seen>>> = Arc::new(Mutex::new(Vec::new()));
     let sink = seen.clone();
     let _sub = session
@@ -189,7 +192,13 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
             .arg(&exp)
             .arg("--out")
             .arg(dir.join(format!("run-{i}")))
-            .args(["--connect", &ep, "--json", "--priority", &priority.to_string()])
+            .args([
+                "--connect",
+                &ep,
+                "--json",
+                "--priority",
+                &priority.to_string(),
+            ])
             .env("RUST_LOG", "error")
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
@@ -246,7 +255,10 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
                 .to_string()
         })
         .collect();
-    let in_window: Vec<&Seen> = seen.iter().filter(|(t, _, _)| *t >= from && *t < to).collect();
+    let in_window: Vec<&Seen> = seen
+        .iter()
+        .filter(|(t, _, _)| *t >= from && *t < to)
+        .collect();
     let busy: f64 = in_window.iter().map(|(_, _, w)| w).sum();
     let slot_s = f64::from(a.workers) * f64::from(a.slots) * window;
     let psum: f64 = coords.iter().map(|(_, p)| f64::from(*p)).sum();
@@ -294,7 +306,11 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
         window_s: window,
         utilisation: busy / slot_s,
         trials_per_s: in_window.len() as f64 / window,
-        coordinator_cpu_ms_per_trial: if trials > 0 { cpu / trials as f64 * 1e3 } else { 0.0 },
+        coordinator_cpu_ms_per_trial: if trials > 0 {
+            cpu / trials as f64 * 1e3
+        } else {
+            0.0
+        },
         decide_ms_per_decision: if decisions > 0 {
             decide_s / decisions as f64 * 1e3
         } else {

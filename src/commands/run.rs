@@ -6,7 +6,7 @@ use anyhow::anyhow;
 use crate::{
     args::{JobArgs, NetArgs},
     common::Failure,
-    net::{free_loopback_port, open_session},
+    net::open_session,
     serve::{open_run, runtime, serve_with_view, signals, summary},
 };
 
@@ -35,28 +35,34 @@ pub fn run(
                 "--listen `{e}`: `run` serves on loopback only (tcp/127.0.0.1:PORT); use `coordinator` and `worker` for a cluster"
             )))
         }
-        None => format!(
-            "tcp/127.0.0.1:{}",
-            free_loopback_port().map_err(Failure::Job)?
-        ),
+        // A port the OS picks, read back from the session.
+        None => "tcp/127.0.0.1:0".to_string(),
     };
-    eprintln!("zenoh on {endpoint}; watch from another terminal with `naofarm watch RUN --connect {endpoint}`");
     let coord_net = NetArgs {
-        listen: vec![endpoint.clone()],
+        listen: vec![endpoint],
         prefix: protocol::keys::DEFAULT_PREFIX.to_string(),
         ..NetArgs::default()
-    };
-    let worker_net = NetArgs {
-        connect: vec![endpoint],
-        listen: vec![],
-        prefix: protocol::keys::DEFAULT_PREFIX.to_string(),
-        config: None,
     };
     let ccfg = coord_net.zenoh_config(&[]).map_err(Failure::Job)?;
     let (run, effects) = open_run(job)?;
     let rt = runtime()?;
     rt.block_on(async {
         let session = open_session(ccfg).await?;
+        let endpoint = session
+            .info()
+            .locators()
+            .await
+            .into_iter()
+            .map(|l| l.to_string())
+            .find(|l| l.starts_with("tcp/127."))
+            .ok_or_else(|| Failure::Job(anyhow!("the session listens on no loopback endpoint")))?;
+        eprintln!("zenoh on {endpoint}; watch from another terminal with `naofarm watch RUN --connect {endpoint}`");
+        let worker_net = NetArgs {
+            connect: vec![endpoint],
+            listen: vec![],
+            prefix: protocol::keys::DEFAULT_PREFIX.to_string(),
+            config: None,
+        };
         let shutdown = signals();
         let mut handles = Vec::new();
         let mut worker_sessions = Vec::new();
