@@ -986,3 +986,79 @@ fn bad_messages_are_counted_and_change_nothing() {
         .unwrap_or_else(|| panic!("no summary in {log}"));
     assert!(refused >= bad.len() as u64, "{log}");
 }
+
+#[test]
+fn a_held_run_thread_never_holds_up_work_requests() {
+    // The run's thread (journal, pickOut, CLOP) is held for a long while
+    // after its first outcome, as a slow fit would: meanwhile the service
+    // keeps handing the ready trials to workers and answering queries.
+    let dir = scratch("held");
+    let exp = experiment(&dir, 6);
+    let out = dir.join("run");
+    let stderr = out.with_extension("stderr");
+    let mut child = naofarm()
+        .args(["coordinator", "--json", "--listen", "tcp/127.0.0.1:0"])
+        .arg(&exp)
+        .arg("--out")
+        .arg(&out)
+        .env("NAOFARM_FAULT_DECIDE_HOLD", "8000@1")
+        .env("RUST_LOG", "warn")
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&stderr).unwrap())
+        .spawn()
+        .unwrap();
+    let deadline = Instant::now() + TIMEOUT;
+    let port: u16 = loop {
+        let text = std::fs::read_to_string(&stderr).unwrap_or_default();
+        if let Some(p) = text
+            .lines()
+            .find_map(|l| l.strip_prefix("coordinator listening on tcp/127.0.0.1:"))
+            .and_then(|p| p.trim().parse().ok())
+        {
+            break p;
+        }
+        assert!(Instant::now() < deadline, "no endpoint: {text}");
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    let ws: Vec<Proc> = (0..2).map(|_| worker(port, 2, 20)).collect();
+    while !plain(&std::fs::read_to_string(&stderr).unwrap_or_default()).contains("thread holds") {
+        assert!(
+            Instant::now() < deadline,
+            "the hook never held the run's thread"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    // 3 iterations of 6 trials are open: all 18 get handed out and run
+    // while the journal still holds one outcome.
+    let started = || {
+        ws.iter()
+            .map(|w| w.stderr().matches("trial started").count())
+            .sum::<usize>()
+    };
+    while started() < 18 {
+        assert!(
+            Instant::now() < deadline,
+            "work stopped with the run's thread: {} started",
+            started()
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let text = plain(&std::fs::read_to_string(&stderr).unwrap_or_default());
+    let outcomes = journal(&out)
+        .iter()
+        .filter(|r| matches!(r, Record::Outcome { .. }))
+        .count();
+    assert!(
+        !text.contains("thread goes on") && outcomes <= 1,
+        "the trials were handed out while the run's thread was held ({outcomes} journaled)"
+    );
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(Instant::now() < deadline, "the run never finished");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert!(status.success());
+    assert_every_trial_once(&journal(&out), 6);
+}

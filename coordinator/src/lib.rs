@@ -5,7 +5,9 @@
 //!   `protocol::pickout`);
 //! - **durable state**: [`journal`] (the append-only, checksummed journal and
 //!   its damage rules), [`lock`] (one coordinator per run directory), [`run`]
-//!   (a run on disk: create, resume, extend, salvage, replay a farm trial);
+//!   (a run on disk: create, resume, extend, salvage, replay a farm trial),
+//!   [`decider`] (the run on its own thread, so its journal and CLOP's fits
+//!   never hold up the transport);
 //! - **transport**: [`schedule`] (who runs which trial, leases and liveness, a
 //!   pure part under the caller's clock) and [`service`] (the zenoh loop that
 //!   moves messages between workers, watchers and the run), and for watchers
@@ -17,6 +19,7 @@
 #![warn(missing_docs)]
 
 pub mod clop;
+pub mod decider;
 pub mod evolve;
 pub mod follow;
 pub mod journal;

@@ -31,8 +31,9 @@ use protocol::{
 use zenoh::{bytes::Encoding, sample::SampleKind, Session};
 
 use crate::{
-    evolve::{DecidedIteration, OpenedIteration},
-    run::{Effect, FailureVerdict, Run, RunError},
+    decider::{self, Cmd, Decider, Facts, Fx, Reply, Snapshot, Verdict},
+    evolve::{Counted, OpenedIteration},
+    run::{Effect, Run, RunError},
     schedule::{Answer, Scheduler},
 };
 
@@ -147,7 +148,18 @@ fn zerr(e: impl std::fmt::Display) -> ServiceError {
 }
 
 struct State {
-    run: Run,
+    /// Commands to the run's thread (journal, pickOut, CLOP).
+    run: std::sync::mpsc::Sender<Cmd>,
+    /// The run as of its thread's last reply.
+    snap: Snapshot,
+    /// Fixed facts, pending trials and who failed them (kept here as the
+    /// service takes outcomes and failures; the run's thread agrees).
+    facts: Facts,
+    /// Control queries waiting for the run's thread, by tag.
+    ctl_waiting: HashMap<u64, zenoh::query::Query>,
+    /// Outcomes waiting for the run's thread, by tag (published once journaled).
+    outcome_waiting: HashMap<u64, TrialOutcome>,
+    next_tag: u64,
     rkeys: RunKeys,
     fkeys: FleetKeys,
     /// Sequence number of the last advert; whether it said trials were ready;
@@ -174,9 +186,8 @@ struct State {
 
 impl State {
     fn status(&self) -> RunStatus {
-        let ev = self.run.evolve();
-        let (a, e, r) = ev.counts();
-        let exp = ev.experiment();
+        let (a, e, r) = self.snap.counts;
+        let exp = &self.facts.experiment;
         let secs = self.started.elapsed().as_secs_f64();
         #[allow(clippy::cast_precision_loss)]
         let rate = if secs > 0.0 {
@@ -186,29 +197,29 @@ impl State {
         };
         RunStatus {
             run: exp.name.clone(),
-            id: self.run.id().to_string(),
-            priority: self.run.priority(),
+            id: self.facts.id.clone(),
+            priority: self.snap.priority,
             state: self.state(),
             planned: exp.iterations,
-            opened: ev.opened(),
-            decided: ev.decided(),
+            opened: self.snap.opened,
+            decided: self.snap.decided,
             accepts: a,
             equivalents: e,
             rejects: r,
-            best: ev.best_wire(),
-            optim2: ev.named(&ev.optim2()),
+            best: self.snap.best.clone(),
+            optim2: self.snap.optim2.clone(),
             workers: u32::try_from(self.sched.workers()).unwrap_or(u32::MAX),
             trials_per_s: rate,
-            finished: ev.finished(),
+            finished: self.snap.finished,
         }
     }
 
     fn state(&self) -> RunState {
-        if self.run.evolve().finished() {
+        if self.snap.finished {
             RunState::Finished
         } else if self.stopped.is_some() {
             RunState::Stopped
-        } else if self.run.paused() {
+        } else if self.snap.paused {
             RunState::Paused
         } else {
             RunState::Running
@@ -224,14 +235,13 @@ impl State {
         };
         self.advert.1 = ready > 0;
         self.advert.2 = false;
-        let ev = self.run.evolve();
         RunAdvert {
-            id: self.run.id().to_string(),
-            name: ev.experiment().name.clone(),
-            priority: self.run.priority(),
+            id: self.facts.id.clone(),
+            name: self.facts.experiment.name.clone(),
+            priority: self.snap.priority,
             ready,
             state: self.state(),
-            duration_s: ev.experiment().trial_duration_s,
+            duration_s: self.facts.experiment.trial_duration_s,
             seq: self.advert.0,
         }
     }
@@ -241,18 +251,6 @@ impl State {
     fn advert_due(&self) -> bool {
         let ready = self.state() == RunState::Running && self.sched.ready() > 0;
         ready != self.advert.1 || (ready && self.advert.2)
-    }
-
-    fn result_of(&self, d: &DecidedIteration) -> IterationResult {
-        let ev = self.run.evolve();
-        IterationResult {
-            run: ev.experiment().name.clone(),
-            iteration: d.iteration,
-            params: ev.named(&d.params),
-            stats: d.stats.clone(),
-            decision: d.decision,
-            best: d.best.as_ref().map(|b| ev.wire_best(b)),
-        }
     }
 
     /// A worker is gone (token dropped, or silent): its trials count as failed
@@ -272,22 +270,38 @@ impl State {
         Ok(())
     }
 
-    /// Journals a failure of trial `t` on worker `id` and re-queues the trial,
-    /// or stops the run when it has failed too often.
+    /// Trial `t` failed on worker `id`: it goes back to the queue at once
+    /// (offered to others first) and the run's thread journals the failure;
+    /// its verdict may stop the run. A trial no longer pending is ignored.
     fn failed(&mut self, t: (u64, u32), id: &str, reason: &str) -> Result<(), ServiceError> {
-        match self.run.on_failure(t.0, t.1, id, reason)? {
-            FailureVerdict::Ignored => {}
-            FailureVerdict::Retry => {
-                self.counters.failures += 1;
-                self.counters.redispatched += 1;
-                self.sched.failed(t, Instant::now());
-            }
-            FailureVerdict::GiveUp(g) => {
-                self.counters.failures += 1;
-                return Err(ServiceError::GaveUp(g));
-            }
+        if !self.facts.pending.contains(&t) {
+            return Ok(());
         }
-        Ok(())
+        self.facts
+            .failed
+            .entry(t)
+            .or_default()
+            .insert(id.to_string());
+        self.counters.failures += 1;
+        self.counters.redispatched += 1;
+        self.sched.failed(t, Instant::now());
+        self.send(Cmd::Failure {
+            iteration: t.0,
+            trial: t.1,
+            worker: id.to_string(),
+            reason: reason.to_string(),
+        })
+    }
+
+    fn send(&self, cmd: Cmd) -> Result<(), ServiceError> {
+        self.run
+            .send(cmd)
+            .map_err(|_| ServiceError::Zenoh("the run's thread ended".into()))
+    }
+
+    fn tag(&mut self) -> u64 {
+        self.next_tag += 1;
+        self.next_tag
     }
 
     /// Refuses a message from `source` for `reason`: counted per reason, logged once per source and reason.
@@ -309,7 +323,7 @@ impl State {
 
     /// A trial was run: every other worker that failed it gets a mark.
     fn ran_elsewhere(&mut self, t: (u64, u32), by: &str) {
-        for w in self.run.failed_workers(t.0, t.1) {
+        for w in self.facts.failed.remove(&t).unwrap_or_default() {
             if w == by {
                 continue;
             }
@@ -386,8 +400,31 @@ pub async fn serve(
         .declare_token(keys::coordinator(&prefix, &id))
         .await
         .map_err(zerr)?;
+    if let Some(g) = run.exhausted() {
+        return Err(ServiceError::GaveUp(g));
+    }
+    // A resumed run answers history queries with what it decided before.
+    let history: Vec<IterationResult> = run
+        .evolve()
+        .history()
+        .iter()
+        .map(|d| decider::result_of(&run, d))
+        .collect();
+    let effects = decider::effects(&run, effects);
+    let facts = Facts::of(&run);
+    let snap = Snapshot::of(&run);
+    let Decider {
+        tx,
+        rx: mut replies,
+        handle,
+    } = Decider::start(run).map_err(|e| ServiceError::Zenoh(format!("the run's thread: {e}")))?;
     let mut st = State {
-        run,
+        run: tx,
+        snap,
+        facts,
+        ctl_waiting: HashMap::new(),
+        outcome_waiting: HashMap::new(),
+        next_tag: 0,
         sched: Scheduler::new(cfg.lease, cfg.silence),
         rkeys,
         fkeys,
@@ -398,45 +435,99 @@ pub async fn serve(
         dispatch: 0,
         counters: Counters::default(),
         finished: false,
-        history: Vec::new(),
+        history,
         started: Instant::now(),
         trials_done: 0,
         bad: HashMap::new(),
         logged: std::collections::HashSet::new(),
     };
-    if let Some(g) = st.run.exhausted() {
-        return Err(ServiceError::GaveUp(g));
-    }
-    // A resumed run answers history queries with what it decided before.
-    st.history = st
-        .run
-        .evolve()
-        .history()
-        .iter()
-        .map(|d| st.result_of(d))
-        .collect();
     if let Some(tx) = &events {
         let _ = tx.send(Event::Started(st.history.clone(), Box::new(st.status())));
     }
-    handle_effects(&session, &mut st, effects, events.as_ref()).await?;
-    advertise(&session, &mut st).await;
+    let ended = serve_loop(
+        &session,
+        &mut st,
+        effects,
+        &mut replies,
+        Subscriptions {
+            outcomes,
+            failures,
+            presence,
+            live,
+            work_q,
+            ctl_q,
+            status_q,
+            history_q,
+        },
+        &mut shutdown,
+        events.as_ref(),
+    )
+    .await;
+    // Everything sent is applied and the run closed before this returns.
+    let State { run, .. } = st;
+    drop(run);
+    let _ = tokio::task::spawn_blocking(move || {
+        if handle.join().is_err() {
+            tracing::error!("the run's thread panicked");
+        }
+    })
+    .await;
+    drop(replies);
+    ended
+}
+
+/// What the service listens to.
+struct Subscriptions {
+    outcomes: zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+    failures: zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+    presence: zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+    live: zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+    work_q: zenoh::query::Queryable<zenoh::handlers::FifoChannelHandler<zenoh::query::Query>>,
+    ctl_q: zenoh::query::Queryable<zenoh::handlers::FifoChannelHandler<zenoh::query::Query>>,
+    status_q: zenoh::query::Queryable<zenoh::handlers::FifoChannelHandler<zenoh::query::Query>>,
+    history_q: zenoh::query::Queryable<zenoh::handlers::FifoChannelHandler<zenoh::query::Query>>,
+}
+
+#[allow(clippy::too_many_lines)]
+async fn serve_loop(
+    session: &Session,
+    st: &mut State,
+    effects: Vec<Fx>,
+    replies: &mut tokio::sync::mpsc::UnboundedReceiver<Reply>,
+    subs: Subscriptions,
+    shutdown: &mut tokio::sync::watch::Receiver<bool>,
+    events: Option<&tokio::sync::mpsc::UnboundedSender<Event>>,
+) -> Result<Ended, ServiceError> {
+    let Subscriptions {
+        outcomes,
+        failures,
+        presence,
+        live,
+        work_q,
+        ctl_q,
+        status_q,
+        history_q,
+    } = subs;
+    let id = st.facts.id.clone();
+    handle_effects(session, st, effects, events).await?;
+    advertise(session, st).await;
     let mut tick = tokio::time::interval(Duration::from_millis(50));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let mut ad_tick = tokio::time::interval(ADVERT_EVERY);
     ad_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
         if st.finished {
-            advertise(&session, &mut st).await;
-            publish(&session, &st.rkeys.status(), &st.status()).await;
-            return Ok(Ended::Finished(st.counters));
+            advertise(session, st).await;
+            publish(session, &st.rkeys.status(), &st.status()).await;
+            return Ok(Ended::Finished(st.counters.clone()));
         }
         if let Some(by) = st.stopped.clone() {
-            advertise(&session, &mut st).await;
-            publish(&session, &st.rkeys.status(), &st.status()).await;
-            return Ok(Ended::Stopped(st.counters, by));
+            advertise(session, st).await;
+            publish(session, &st.rkeys.status(), &st.status()).await;
+            return Ok(Ended::Stopped(st.counters.clone(), by));
         }
         if st.advert_due() {
-            advertise(&session, &mut st).await;
+            advertise(session, st).await;
         }
         tokio::select! {
             s = outcomes.recv_async() => {
@@ -445,13 +536,13 @@ pub async fn serve(
                 match TrialOutcome::decode(&bytes) {
                     Err(e) => st.refuse("an undecodable message", &format!("outcome: {e}")),
                     Ok(o) if o.run != id => st.refuse(&o.worker, "outcome for another run"),
-                    Ok(o) => on_outcome(&session, &mut st, o, events.as_ref()).await?,
+                    Ok(o) => on_outcome(st, o)?,
                 }
             }
             s = failures.recv_async() => {
                 let s = s.map_err(zerr)?;
                 match TrialFailure::decode(&s.payload().to_bytes()) {
-                    Ok(f) if f.run == id => on_failure(&mut st, &f)?,
+                    Ok(f) if f.run == id => on_failure(st, &f)?,
                     Ok(f) => st.refuse(&f.worker, "failure report for another run"),
                     Err(e) => st.refuse("an undecodable message", &format!("failure report: {e}")),
                 }
@@ -472,11 +563,11 @@ pub async fn serve(
             }
             q = work_q.recv_async() => {
                 let q = q.map_err(zerr)?;
-                on_work(&mut st, &q).await;
+                on_work(st, &q).await;
             }
             q = ctl_q.recv_async() => {
                 let q = q.map_err(zerr)?;
-                on_ctl(&mut st, &q).await?;
+                on_ctl(st, q).await?;
             }
             q = status_q.recv_async() => {
                 let q = q.map_err(zerr)?;
@@ -497,7 +588,7 @@ pub async fn serve(
                 }
                 let t = st.sched.tick(now);
                 for (trial, worker) in t.expired {
-                    if st.run.is_pending(trial.0, trial.1) {
+                    if st.facts.pending.contains(&trial) {
                         tracing::info!(iteration = trial.0, trial = trial.1, %worker, "lease expired; the trial is offered again");
                         st.sched.enqueue(trial, now);
                         st.counters.redispatched += 1;
@@ -508,10 +599,11 @@ pub async fn serve(
                     st.requeue_worker(&wid)?;
                 }
             }
-            _ = ad_tick.tick() => advertise(&session, &mut st).await,
+            _ = ad_tick.tick() => advertise(session, st).await,
+            Some(r) = replies.recv() => on_reply(session, st, r, events).await?,
             _ = shutdown.changed() => {
                 if *shutdown.borrow() {
-                    return Ok(Ended::Interrupted(st.counters));
+                    return Ok(Ended::Interrupted(st.counters.clone()));
                 }
             }
         }
@@ -574,7 +666,7 @@ async fn on_work(st: &mut State, q: &zenoh::query::Query) {
         }
     };
     let state = st.state();
-    let exp = st.run.evolve().experiment();
+    let exp = &st.facts.experiment;
     let mut note = None;
     let mut trials = Vec::new();
     if state != RunState::Running {
@@ -587,14 +679,14 @@ async fn on_work(st: &mut State, q: &zenoh::query::Query) {
         st.sched
             .worker_seen(&req.worker, Some(req.slots), Instant::now());
     } else {
-        let run = &st.run;
+        let failed = &st.facts.failed;
         let mut rng = rand::rng();
         let taken = st.sched.take(
             &req.worker,
             req.slots,
             req.want,
             Instant::now(),
-            &|t| run.failed_workers(t.0, t.1),
+            &|t| failed.get(&t).cloned().unwrap_or_default(),
             &mut || rand::Rng::random::<u64>(&mut rng),
         );
         for (t, dispatch_id) in taken {
@@ -603,8 +695,7 @@ async fn on_work(st: &mut State, q: &zenoh::query::Query) {
                 .get(&t.0)
                 .ok_or_else(|| "its iteration is not open".to_string())
                 .and_then(|o| {
-                    st.run
-                        .request(o, t.1, dispatch_id)
+                    crate::run::request(&st.facts.experiment, &st.facts.id, o, t.1, dispatch_id)
                         .map_err(|e| e.to_string())
                 });
             match built {
@@ -648,30 +739,101 @@ async fn on_work(st: &mut State, q: &zenoh::query::Query) {
     }
 }
 
-/// `naofarm ctl`: pause, resume, stop, priority; journaled, then answered with the status.
-async fn on_ctl(st: &mut State, q: &zenoh::query::Query) -> Result<(), ServiceError> {
+/// `naofarm ctl`: pause, resume, stop, priority; the run's thread journals
+/// it, and the query is answered with the status once it has.
+async fn on_ctl(st: &mut State, q: zenoh::query::Query) -> Result<(), ServiceError> {
     let Some(payload) = q.payload() else {
-        reply_err(q, "a control request needs a ControlRequest payload").await;
+        reply_err(&q, "a control request needs a ControlRequest payload").await;
         return Ok(());
     };
     let req = match ControlRequest::decode(&payload.to_bytes()) {
         Ok(r) => r,
         Err(e) => {
             st.refuse("an undecodable message", &format!("control: {e}"));
-            reply_err(q, &e.to_string()).await;
+            reply_err(&q, &e.to_string()).await;
             return Ok(());
         }
     };
-    if st.run.evolve().finished() {
-        reply_err(q, "the run is finished").await;
-        return Ok(());
+    let tag = st.tag();
+    st.ctl_waiting.insert(tag, q);
+    st.send(Cmd::Control {
+        action: req.action,
+        by: req.by,
+        tag,
+    })
+}
+
+/// The run's thread answered.
+async fn on_reply(
+    session: &Session,
+    st: &mut State,
+    reply: Reply,
+    events: Option<&tokio::sync::mpsc::UnboundedSender<Event>>,
+) -> Result<(), ServiceError> {
+    match reply {
+        Reply::Applied {
+            tag,
+            counted,
+            effects,
+            snapshot,
+            took_s,
+        } => {
+            st.snap = *snapshot;
+            st.counters.decide_s += took_s;
+            if let Some(o) = st.outcome_waiting.remove(&tag) {
+                match counted {
+                    Counted::New => {
+                        publish(session, &st.rkeys.trial(o.iteration, o.trial), &o).await
+                    }
+                    Counted::Duplicate => {
+                        st.counters.duplicates += 1;
+                        st.counters.accepted = st.counters.accepted.saturating_sub(1);
+                    }
+                }
+            }
+            handle_effects(session, st, effects, events).await?;
+        }
+        Reply::Failed {
+            iteration,
+            trial,
+            verdict,
+        } => match verdict {
+            Verdict::Retry => {}
+            Verdict::Ignored => {
+                if !st.facts.pending.contains(&(iteration, trial)) {
+                    st.sched.forget((iteration, trial));
+                }
+            }
+            Verdict::GiveUp(g) => return Err(ServiceError::GaveUp(g)),
+        },
+        Reply::Controlled {
+            tag,
+            action,
+            by,
+            result,
+            snapshot,
+        } => {
+            st.snap = *snapshot;
+            let q = st.ctl_waiting.remove(&tag);
+            match result {
+                Ok(()) => {
+                    tracing::info!(?action, %by, "control");
+                    if action == Control::Stop {
+                        st.stopped = Some(by);
+                    }
+                    if let Some(q) = q {
+                        reply_json(&q, st.status().to_json().map_err(|e| e.to_string())).await;
+                    }
+                }
+                Err(why) => {
+                    if let Some(q) = q {
+                        reply_err(&q, &why).await;
+                    }
+                }
+            }
+        }
+        Reply::Fatal(e) => return Err(e.into()),
     }
-    st.run.control(req.action, &req.by)?;
-    tracing::info!(action = ?req.action, by = %req.by, "control");
-    if req.action == Control::Stop {
-        st.stopped = Some(req.by.clone());
-    }
-    reply_json(q, st.status().to_json().map_err(|e| e.to_string())).await;
     Ok(())
 }
 
@@ -743,12 +905,7 @@ fn plausible(o: &TrialOutcome, duration_s: f64) -> Result<(), String> {
     Ok(())
 }
 
-async fn on_outcome(
-    session: &Session,
-    st: &mut State,
-    o: TrialOutcome,
-    events: Option<&tokio::sync::mpsc::UnboundedSender<Event>>,
-) -> Result<(), ServiceError> {
+fn on_outcome(st: &mut State, o: TrialOutcome) -> Result<(), ServiceError> {
     let t = (o.iteration, o.trial);
     let answer = st.sched.answered(t, &o.worker, o.dispatch, Instant::now());
     if answer == Answer::WrongDispatch {
@@ -763,86 +920,77 @@ async fn on_outcome(
         st.refuse(&o.worker, answer.reason());
         return Ok(());
     }
-    let duration = st.run.evolve().experiment().trial_duration_s;
+    let duration = st.facts.experiment.trial_duration_s;
     if let Err(why) = plausible(&o, duration) {
         tracing::warn!(worker = %o.worker, iteration = o.iteration, trial = o.trial, %why, "an implausible outcome counts as a failure");
         st.failed(t, &o.worker, &format!("implausible outcome: {why}"))?;
         return Ok(());
     }
-
-    let clock = std::time::Instant::now();
-    let applied = st
-        .run
-        .on_outcome(o.iteration, o.trial, o.seed, o.measurement(), &o.worker);
-    st.counters.decide_s += clock.elapsed().as_secs_f64();
-    match applied {
-        Ok((crate::evolve::Counted::Duplicate, _)) => {
-            st.counters.duplicates += 1;
-            tracing::debug!(
-                iteration = o.iteration,
-                trial = o.trial,
-                "duplicate outcome ignored"
-            );
-        }
-        Ok((crate::evolve::Counted::New, effects)) => {
-            st.ran_elsewhere(t, &o.worker);
-            st.counters.accepted += 1;
-            st.trials_done += 1;
-            st.sched.forget(t);
-            publish(session, &st.rkeys.trial(o.iteration, o.trial), &o).await;
-            handle_effects(session, st, effects, events).await?;
-        }
-        Err(RunError::Refused(e)) => {
-            let reason = match e {
-                crate::evolve::OutcomeError::WrongSeed { .. } => "wrong seed",
-                crate::evolve::OutcomeError::Invalid { .. } => "invalid numbers",
-                _ => "trial not open",
-            };
-            st.refuse(&o.worker, reason);
-        }
-        Err(e) => return Err(e.into()),
+    let checked = st
+        .opened
+        .get(&t.0)
+        .filter(|_| st.facts.pending.contains(&t))
+        .ok_or_else(|| "trial not open".to_string())
+        .and_then(|opened| decider::check(opened, o.trial, o.seed, &o.measurement()));
+    if let Err(why) = checked {
+        // Its worker answered the dispatch with something the run would refuse.
+        st.refuse(&o.worker, &why);
+        st.failed(t, &o.worker, &format!("refused outcome: {why}"))?;
+        return Ok(());
     }
+    st.facts.pending.remove(&t);
+    st.sched.forget(t);
+    st.ran_elsewhere(t, &o.worker);
+    st.counters.accepted += 1;
+    st.trials_done += 1;
+    let tag = st.tag();
+    st.send(Cmd::Outcome {
+        iteration: o.iteration,
+        trial: o.trial,
+        seed: o.seed,
+        measurement: o.measurement(),
+        worker: o.worker.clone(),
+        tag,
+    })?;
+    st.outcome_waiting.insert(tag, o);
     Ok(())
 }
 
 async fn handle_effects(
     session: &Session,
     st: &mut State,
-    effects: Vec<Effect>,
+    effects: Vec<Fx>,
     events: Option<&tokio::sync::mpsc::UnboundedSender<Event>>,
 ) -> Result<(), ServiceError> {
-    let name = st.run.evolve().experiment().name.clone();
-    let id = st.run.id().to_string();
     for e in effects {
         match e {
-            Effect::Dispatch(o, ks) => {
+            Fx::Open(o, ks, named) => {
                 for k in ks {
+                    st.facts.pending.insert((o.iteration, k));
                     st.sched.enqueue((o.iteration, k), Instant::now());
                 }
-                let ev = st.run.evolve();
                 let json = serde_json::json!({
-                    "run": name,
-                    "id": id,
+                    "run": st.facts.experiment.name,
+                    "id": st.facts.id,
                     "iteration": o.iteration,
-                    "params": ev.named(&o.params),
+                    "params": named,
                     "trials": o.seeds.len(),
                     "expert": o.expert,
                 });
                 put_json(session, &st.rkeys.params(o.iteration), json.to_string()).await;
                 st.opened.insert(o.iteration, o);
             }
-            Effect::Decided(d) => {
-                st.opened.remove(&d.iteration);
-                let r = st.result_of(&d);
-                publish(session, &st.rkeys.results(d.iteration), &r).await;
+            Fx::Decided(r) => {
+                st.opened.remove(&r.iteration);
+                publish(session, &st.rkeys.results(r.iteration), r.as_ref()).await;
                 let status = st.status();
                 publish(session, &st.rkeys.status(), &status).await;
-                st.history.push(r.clone());
+                st.history.push((*r).clone());
                 if let Some(tx) = events {
-                    let _ = tx.send(Event::Decided(Box::new(r), Box::new(status)));
+                    let _ = tx.send(Event::Decided(r, Box::new(status)));
                 }
             }
-            Effect::Finished => st.finished = true,
+            Fx::Finished => st.finished = true,
         }
     }
     Ok(())

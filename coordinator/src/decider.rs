@@ -1,0 +1,381 @@
+//! The run's own thread: it owns the [`Run`] (journal, pickOut, CLOP) and
+//! applies outcomes, failures and control actions in the order the service
+//! sends them, so that CLOP's fits and draws and the journal's fsyncs never
+//! hold up the service's event loop (leases, heartbeats, work requests).
+//!
+//! The service keeps a [`Snapshot`] of what it shows (status, history) and
+//! the few facts it decides with (which trials are pending, who failed
+//! them); the decider sends a new snapshot with every reply. Must not: talk
+//! to zenoh or read a clock other than to time its own work.
+
+use std::{collections::BTreeSet, sync::mpsc, thread::JoinHandle, time::Instant};
+
+use protocol::{
+    measurement::Measurement,
+    wire::{Best, Control, IterationResult},
+    Experiment,
+};
+
+use crate::{
+    evolve::{Counted, OpenedIteration},
+    run::{Effect, FailureVerdict, GaveUp, Run, RunError},
+};
+
+/// What the service shows of the run, as of the decider's last reply.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Snapshot {
+    /// Iterations opened.
+    pub opened: u64,
+    /// Iterations decided.
+    pub decided: u64,
+    /// ACCEPT, EQUIVALENT, REJECT counts.
+    pub counts: (u64, u64, u64),
+    /// ν′ (Optim.1).
+    pub best: Option<Best>,
+    /// CLOP's mean (Optim.2), named.
+    pub optim2: Vec<(String, f64)>,
+    /// Every planned iteration decided.
+    pub finished: bool,
+    /// The journaled priority.
+    pub priority: u32,
+    /// Journaled as paused.
+    pub paused: bool,
+}
+
+impl Snapshot {
+    /// Reads it off `run`.
+    #[must_use]
+    pub fn of(run: &Run) -> Self {
+        let ev = run.evolve();
+        Self {
+            opened: ev.opened(),
+            decided: ev.decided(),
+            counts: ev.counts(),
+            best: ev.best_wire(),
+            optim2: ev.named(&ev.optim2()),
+            finished: ev.finished(),
+            priority: run.priority(),
+            paused: run.paused(),
+        }
+    }
+}
+
+/// An effect of the run, ready for the service to act on.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Fx {
+    /// Trials of an opened iteration to run (its parameters named, for the params topic).
+    Open(OpenedIteration, Vec<u32>, Vec<(String, f64)>),
+    /// An iteration was decided (as the results topic carries it).
+    Decided(Box<IterationResult>),
+    /// The run is complete.
+    Finished,
+}
+
+/// Converts the run's effects (the service's initial ones included).
+#[must_use]
+pub fn effects(run: &Run, effects: Vec<Effect>) -> Vec<Fx> {
+    let ev = run.evolve();
+    effects
+        .into_iter()
+        .map(|e| match e {
+            Effect::Dispatch(o, ks) => {
+                let named = ev.named(&o.params);
+                Fx::Open(o, ks, named)
+            }
+            Effect::Decided(d) => Fx::Decided(Box::new(result_of(run, &d))),
+            Effect::Finished => Fx::Finished,
+        })
+        .collect()
+}
+
+/// A decided iteration as the results topic carries it.
+#[must_use]
+pub fn result_of(run: &Run, d: &crate::evolve::DecidedIteration) -> IterationResult {
+    let ev = run.evolve();
+    IterationResult {
+        run: ev.experiment().name.clone(),
+        iteration: d.iteration,
+        params: ev.named(&d.params),
+        stats: d.stats.clone(),
+        decision: d.decision,
+        best: d.best.as_ref().map(|b| ev.wire_best(b)),
+    }
+}
+
+/// What the service asks of the run.
+#[derive(Debug)]
+pub enum Cmd {
+    /// Apply an outcome the service took (answer to the dispatch in flight, plausible).
+    Outcome {
+        /// Iteration.
+        iteration: u64,
+        /// Trial.
+        trial: u32,
+        /// Seed.
+        seed: u64,
+        /// The measurement.
+        measurement: Measurement,
+        /// The worker.
+        worker: String,
+        /// Handed back with the reply (the outcome to publish).
+        tag: u64,
+    },
+    /// Journal a failure of a trial on a worker.
+    Failure {
+        /// Iteration.
+        iteration: u64,
+        /// Trial.
+        trial: u32,
+        /// The worker.
+        worker: String,
+        /// Why.
+        reason: String,
+    },
+    /// Journal and apply a control action.
+    Control {
+        /// What.
+        action: Control,
+        /// Who asked.
+        by: String,
+        /// Handed back with the reply (which query to answer).
+        tag: u64,
+    },
+}
+
+/// The run's answers, in the order of the commands.
+#[derive(Debug)]
+pub enum Reply {
+    /// An outcome was applied.
+    Applied {
+        /// The command's tag.
+        tag: u64,
+        /// New or duplicate.
+        counted: Counted,
+        /// What follows from it.
+        effects: Vec<Fx>,
+        /// The state after it.
+        snapshot: Box<Snapshot>,
+        /// Seconds the run took (journal, pickOut, CLOP).
+        took_s: f64,
+    },
+    /// A failure was journaled (or ignored: the trial was no longer pending).
+    Failed {
+        /// Iteration.
+        iteration: u64,
+        /// Trial.
+        trial: u32,
+        /// The verdict.
+        verdict: Verdict,
+    },
+    /// A control action was journaled and applied, or refused.
+    Controlled {
+        /// The command's tag.
+        tag: u64,
+        /// The action.
+        action: Control,
+        /// Who asked.
+        by: String,
+        /// Refused with this reason, or done.
+        result: Result<(), String>,
+        /// The state after it.
+        snapshot: Box<Snapshot>,
+    },
+    /// The run failed (the journal): the service stops with this.
+    Fatal(RunError),
+}
+
+/// A failure's verdict, without the run's internals.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Verdict {
+    /// Journaled; run it elsewhere.
+    Retry,
+    /// Not pending any more; nothing journaled.
+    Ignored,
+    /// Failed too often: the run stops.
+    GiveUp(GaveUp),
+}
+
+/// The decider thread and its channels.
+pub struct Decider {
+    /// Commands in.
+    pub tx: mpsc::Sender<Cmd>,
+    /// Replies out.
+    pub rx: tokio::sync::mpsc::UnboundedReceiver<Reply>,
+    /// The thread (joined once `tx` is dropped: everything sent is then applied).
+    pub handle: JoinHandle<()>,
+}
+
+impl Decider {
+    /// Moves `run` onto its own thread.
+    ///
+    /// # Errors
+    /// When the thread cannot be started.
+    pub fn start(run: Run) -> std::io::Result<Self> {
+        let (tx, cmds) = mpsc::channel::<Cmd>();
+        let (out, rx) = tokio::sync::mpsc::unbounded_channel();
+        let handle = std::thread::Builder::new()
+            .name("naofarm-run".into())
+            .spawn(move || serve(run, &cmds, &out))?;
+        Ok(Self { tx, rx, handle })
+    }
+
+    /// Stops taking commands and waits until everything sent is applied and
+    /// the run (its journal and lock) is closed.
+    pub fn finish(self) {
+        drop(self.tx);
+        if self.handle.join().is_err() {
+            tracing::error!("the run's thread panicked");
+        }
+    }
+}
+
+/// Test hook, switched on at run time: `NAOFARM_FAULT_DECIDE_HOLD=MS@N` holds
+/// the run's thread for MS milliseconds after it applied its N-th outcome (a
+/// stand-in for a long CLOP fit), to show that the service keeps serving.
+pub const HOLD_VAR: &str = "NAOFARM_FAULT_DECIDE_HOLD";
+
+fn hold_hook() -> Option<(u64, u64)> {
+    let v = std::env::var(HOLD_VAR).ok()?;
+    let (ms, n) = v.split_once('@')?;
+    Some((ms.parse().ok()?, n.parse().ok()?))
+}
+
+fn serve(
+    mut run: Run,
+    cmds: &mpsc::Receiver<Cmd>,
+    out: &tokio::sync::mpsc::UnboundedSender<Reply>,
+) {
+    let hold = hold_hook();
+    let mut applied = 0u64;
+    while let Ok(cmd) = cmds.recv() {
+        if let Some((ms, n)) = hold {
+            if matches!(cmd, Cmd::Outcome { .. }) {
+                applied += 1;
+                if applied == n + 1 {
+                    tracing::warn!(ms, "fault hook {HOLD_VAR}: the run's thread holds");
+                    std::thread::sleep(std::time::Duration::from_millis(ms));
+                    tracing::warn!("fault hook {HOLD_VAR}: the run's thread goes on");
+                }
+            }
+        }
+        let reply = match cmd {
+            Cmd::Outcome {
+                iteration,
+                trial,
+                seed,
+                measurement,
+                worker,
+                tag,
+            } => {
+                let clock = Instant::now();
+                match run.on_outcome(iteration, trial, seed, measurement, &worker) {
+                    Ok((counted, fx)) => Reply::Applied {
+                        tag,
+                        counted,
+                        effects: effects(&run, fx),
+                        snapshot: Box::new(Snapshot::of(&run)),
+                        took_s: clock.elapsed().as_secs_f64(),
+                    },
+                    Err(e) => Reply::Fatal(e),
+                }
+            }
+            Cmd::Failure {
+                iteration,
+                trial,
+                worker,
+                reason,
+            } => match run.on_failure(iteration, trial, &worker, &reason) {
+                Ok(v) => Reply::Failed {
+                    iteration,
+                    trial,
+                    verdict: match v {
+                        FailureVerdict::Retry => Verdict::Retry,
+                        FailureVerdict::Ignored => Verdict::Ignored,
+                        FailureVerdict::GiveUp(g) => Verdict::GiveUp(g),
+                    },
+                },
+                Err(e) => Reply::Fatal(e),
+            },
+            Cmd::Control { action, by, tag } => {
+                let result = if run.evolve().finished() {
+                    Err("the run is finished".to_string())
+                } else {
+                    match run.control(action, &by) {
+                        Ok(()) => Ok(()),
+                        Err(RunError::BadControl { why }) => Err(why),
+                        Err(e) => {
+                            let _ = out.send(Reply::Fatal(e));
+                            return;
+                        }
+                    }
+                };
+                Reply::Controlled {
+                    tag,
+                    action,
+                    by,
+                    result,
+                    snapshot: Box::new(Snapshot::of(&run)),
+                }
+            }
+        };
+        let fatal = matches!(reply, Reply::Fatal(_));
+        if out.send(reply).is_err() || fatal {
+            return;
+        }
+    }
+}
+
+/// What the service needs to know of the run besides the snapshot: fixed
+/// facts, taken before the run moves to its thread.
+#[derive(Debug, Clone)]
+pub struct Facts {
+    /// The effective experiment.
+    pub experiment: Experiment,
+    /// The run id.
+    pub id: String,
+    /// Per pending trial that failed: the workers that failed it.
+    pub failed: std::collections::BTreeMap<(u64, u32), BTreeSet<String>>,
+    /// Trials pending (opened, no outcome yet).
+    pub pending: BTreeSet<(u64, u32)>,
+}
+
+impl Facts {
+    /// Reads them off `run`.
+    #[must_use]
+    pub fn of(run: &Run) -> Self {
+        let ev = run.evolve();
+        let mut pending = BTreeSet::new();
+        for (opened, missing) in ev.missing() {
+            for k in missing {
+                pending.insert((opened.iteration, k));
+            }
+        }
+        let failed = pending
+            .iter()
+            .map(|&(i, k)| ((i, k), run.failed_workers(i, k)))
+            .filter(|(_, w)| !w.is_empty())
+            .collect();
+        Self {
+            experiment: ev.experiment().clone(),
+            id: run.id().to_string(),
+            failed,
+            pending,
+        }
+    }
+}
+
+/// Checks an outcome the service is about to take: the seed of that trial
+/// and the measurement's numbers (the run would refuse otherwise).
+pub fn check(
+    opened: &OpenedIteration,
+    trial: u32,
+    seed: u64,
+    m: &Measurement,
+) -> Result<(), String> {
+    match opened.seeds.get(trial as usize) {
+        None => return Err("no such trial".into()),
+        Some(s) if *s != seed => return Err("wrong seed".into()),
+        Some(_) => {}
+    }
+    m.check()
+}
