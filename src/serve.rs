@@ -186,6 +186,7 @@ pub fn summary(
                     "dispatch_ms_p50": c.dispatch_quantile(0.5),
                     "dispatch_ms_p99": c.dispatch_quantile(0.99),
                     "decide_s": c.decide_s,
+                    "run_cpu_s": c.run_cpu_s,
                 }),
             ),
             _ => view.abandon(),

@@ -201,8 +201,9 @@ pub struct Decider {
     pub tx: mpsc::Sender<Cmd>,
     /// Replies out.
     pub rx: tokio::sync::mpsc::UnboundedReceiver<Reply>,
-    /// The thread (joined once `tx` is dropped: everything sent is then applied).
-    pub handle: JoinHandle<()>,
+    /// The thread (joined once `tx` is dropped: everything sent is then
+    /// applied); it returns the CPU seconds it used (Linux; `None` elsewhere).
+    pub handle: JoinHandle<Option<f64>>,
 }
 
 impl Decider {
@@ -215,17 +216,21 @@ impl Decider {
         let (out, rx) = tokio::sync::mpsc::unbounded_channel();
         let handle = std::thread::Builder::new()
             .name("naofarm-run".into())
-            .spawn(move || serve(run, &cmds, &out))?;
+            .spawn(move || {
+                serve(run, &cmds, &out);
+                thread_cpu_seconds()
+            })?;
         Ok(Self { tx, rx, handle })
     }
 
     /// Stops taking commands and waits until everything sent is applied and
     /// the run (its journal and lock) is closed.
-    pub fn finish(self) {
+    pub fn finish(self) -> Option<f64> {
         drop(self.tx);
-        if self.handle.join().is_err() {
+        self.handle.join().unwrap_or_else(|_| {
             tracing::error!("the run's thread panicked");
-        }
+            None
+        })
     }
 }
 
@@ -238,6 +243,18 @@ fn hold_hook() -> Option<(u64, u64)> {
     let v = std::env::var(HOLD_VAR).ok()?;
     let (ms, n) = v.split_once('@')?;
     Some((ms.parse().ok()?, n.parse().ok()?))
+}
+
+/// CPU time (user + system) the calling thread has used, from
+/// `/proc/thread-self/stat` (Linux; clock ticks of 1/100 s). `None` elsewhere.
+#[must_use]
+pub fn thread_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/thread-self/stat").ok()?;
+    let rest = stat.rsplit_once(')')?.1;
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let utime: f64 = fields.get(11)?.parse().ok()?;
+    let stime: f64 = fields.get(12)?.parse().ok()?;
+    Some((utime + stime) / 100.0)
 }
 
 fn serve(

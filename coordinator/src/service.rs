@@ -79,6 +79,8 @@ pub struct Counters {
     pub dispatch_ms: Vec<f32>,
     /// Seconds spent applying outcomes to the run (journal, pickOut, CLOP's fit and draw).
     pub decide_s: f64,
+    /// CPU seconds of the run's thread (journal, pickOut, CLOP), when known.
+    pub run_cpu_s: Option<f64>,
 }
 
 impl Counters {
@@ -466,14 +468,22 @@ pub async fn serve(
     // Everything sent is applied and the run closed before this returns.
     let State { run, .. } = st;
     drop(run);
-    let _ = tokio::task::spawn_blocking(move || {
-        if handle.join().is_err() {
+    let run_cpu = tokio::task::spawn_blocking(move || {
+        handle.join().unwrap_or_else(|_| {
             tracing::error!("the run's thread panicked");
-        }
+            None
+        })
     })
-    .await;
+    .await
+    .ok()
+    .flatten();
     drop(replies);
-    ended
+    ended.map(|mut e| {
+        match &mut e {
+            Ended::Finished(c) | Ended::Interrupted(c) | Ended::Stopped(c, _) => c.run_cpu_s = run_cpu,
+        }
+        e
+    })
 }
 
 /// What the service listens to.

@@ -55,9 +55,12 @@ fn router(exe: &std::path::Path, procs: &mut Procs) -> anyhow::Result<String> {
         .spawn()?;
     let err = child.stderr.take().context("router stderr")?;
     procs.0.push(child);
-    for line in BufReader::new(err).lines() {
+    let mut lines = BufReader::new(err).lines();
+    for line in lines.by_ref() {
         let line = line?;
         if let Some(ep) = line.strip_prefix("router listening on ") {
+            // Keep draining its stderr, so that it never blocks on a full pipe.
+            std::thread::spawn(move || lines.for_each(drop));
             return Ok(ep.trim().to_string());
         }
     }
@@ -89,6 +92,8 @@ struct Report {
     utilisation: f64,
     trials_per_s: f64,
     coordinator_cpu_ms_per_trial: f64,
+    service_cpu_ms_per_trial: f64,
+    run_cpu_ms_per_decision: f64,
     decide_ms_per_decision: f64,
     dispatch_ms_p50: f64,
     dispatch_ms_p99: f64,
@@ -159,6 +164,8 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
         ("mode", "\"client\"".to_string()),
         ("scouting/multicast/enabled", "false".to_string()),
         ("connect/endpoints", format!("[\"{ep}\"]")),
+        ("connect/timeout_ms", "-1".to_string()),
+        ("connect/exit_on_failure", "false".to_string()),
     ] {
         zcfg.insert_json5(k, &v).map_err(|e| anyhow!("{e}"))?;
     }
@@ -259,24 +266,36 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
         .iter()
         .filter(|(t, _, _)| *t >= from && *t < to)
         .collect();
-    let busy: f64 = in_window.iter().map(|(_, _, w)| w).sum();
+    // Busy slot-seconds inside the window: each trial's [end − its wall time,
+    // end] clipped to it (a trial still running at the window's end is seen
+    // only when it ends, at most one trial time later).
+    let overlap = |(end, _, w): &Seen| -> f64 {
+        let start = end
+            .checked_sub(Duration::from_secs_f64(w.max(0.0)))
+            .unwrap_or(*end);
+        let (a, b) = (start.max(from), (*end).min(to));
+        b.saturating_duration_since(a).as_secs_f64()
+    };
+    let busy: f64 = seen.iter().map(overlap).sum();
     let slot_s = f64::from(a.workers) * f64::from(a.slots) * window;
     let psum: f64 = coords.iter().map(|(_, p)| f64::from(*p)).sum();
     let mut per_run = Vec::new();
     let (mut cpu, mut trials, mut decide_s, mut decisions) = (0.0, 0u64, 0.0, 0u64);
+    let mut run_cpu = 0.0;
     let (mut p50s, mut p99) = (Vec::new(), 0.0f64);
     for (i, f) in finished.iter().enumerate() {
         let f = f.as_ref().context("a run without a final line")?;
-        let mine: f64 = in_window
+        let mine: f64 = seen
             .iter()
             .filter(|(_, r, _)| *r == ids[i])
-            .map(|(_, _, w)| w)
+            .map(overlap)
             .sum();
         let c = f["cpu_s"].as_f64().unwrap_or(0.0);
         let n = f["accepted"].as_u64().unwrap_or(0);
         cpu += c;
         trials += n;
         decide_s += f["decide_s"].as_f64().unwrap_or(0.0);
+        run_cpu += f["run_cpu_s"].as_f64().unwrap_or(0.0);
         decisions += f["status"]["decided"].as_u64().unwrap_or(0);
         if let Some(x) = f["dispatch_ms_p50"].as_f64() {
             p50s.push(x);
@@ -311,6 +330,16 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
         } else {
             0.0
         },
+        service_cpu_ms_per_trial: if trials > 0 {
+            (cpu - run_cpu) / trials as f64 * 1e3
+        } else {
+            0.0
+        },
+        run_cpu_ms_per_decision: if decisions > 0 {
+            run_cpu / decisions as f64 * 1e3
+        } else {
+            0.0
+        },
         decide_ms_per_decision: if decisions > 0 {
             decide_s / decisions as f64 * 1e3
         } else {
@@ -329,8 +358,9 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
     }
     let mut out = format!(
         "{} runs × {} workers × {} slots, trials of {} ms; window {:.1} s (every run with trials ready)\n\
-         utilisation {:.1} %   {:.1} trials/s   coordinator CPU {:.3} ms/trial   \
-         run+CLOP {:.2} ms/decision   dispatch latency p50 {:.1} ms, p99 {:.1} ms\n\
+         utilisation {:.1} %   {:.1} trials/s   dispatch latency p50 {:.1} ms, p99 {:.1} ms\n\
+         coordinator CPU {:.3} ms/trial: service {:.3} ms/trial (zenoh, scheduling, topics) \
+         + the run's thread {:.2} ms CPU/decision (journal, pickOut, CLOP; {:.2} ms wall)\n\
          worst share error {:.1} % of the priority's share\n",
         report.runs,
         report.workers,
@@ -339,10 +369,12 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
         report.window_s,
         report.utilisation * 100.0,
         report.trials_per_s,
-        report.coordinator_cpu_ms_per_trial,
-        report.decide_ms_per_decision,
         report.dispatch_ms_p50,
         report.dispatch_ms_p99,
+        report.coordinator_cpu_ms_per_trial,
+        report.service_cpu_ms_per_trial,
+        report.run_cpu_ms_per_decision,
+        report.decide_ms_per_decision,
         report.worst_share_error * 100.0
     );
     out += &format!(
