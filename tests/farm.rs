@@ -30,6 +30,27 @@ fn experiment(dir: &Path, iterations: u64) -> PathBuf {
     p
 }
 
+/// The port a coordinator listens on, in its own words on stderr
+/// ("coordinator listening on tcp/127.0.0.1:PORT"), waiting for them.
+fn listening_port(stderr: &Path) -> u16 {
+    let deadline = Instant::now() + TIMEOUT;
+    loop {
+        let text = std::fs::read_to_string(stderr).unwrap_or_default();
+        if let Some(p) = text
+            .lines()
+            .find_map(|l| l.strip_prefix("coordinator listening on tcp/127.0.0.1:"))
+            .and_then(|p| p.trim().parse().ok())
+        {
+            return p;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the coordinator never said where it listens: {text}"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
 struct Coordinator {
     child: Child,
     stderr: PathBuf,
@@ -68,23 +89,7 @@ impl Coordinator {
                 }
             }
         });
-        // Its own words: "coordinator listening on tcp/127.0.0.1:PORT".
-        let deadline = Instant::now() + TIMEOUT;
-        let port = loop {
-            let text = std::fs::read_to_string(&stderr).unwrap_or_default();
-            if let Some(p) = text
-                .lines()
-                .find_map(|l| l.strip_prefix("coordinator listening on tcp/127.0.0.1:"))
-                .and_then(|p| p.trim().parse().ok())
-            {
-                break p;
-            }
-            assert!(
-                Instant::now() < deadline,
-                "the coordinator never said where it listens: {text}"
-            );
-            std::thread::sleep(Duration::from_millis(10));
-        };
+        let port = listening_port(&stderr);
         Self {
             child,
             stderr,
@@ -1008,18 +1013,7 @@ fn a_held_run_thread_never_holds_up_work_requests() {
         .spawn()
         .unwrap();
     let deadline = Instant::now() + TIMEOUT;
-    let port: u16 = loop {
-        let text = std::fs::read_to_string(&stderr).unwrap_or_default();
-        if let Some(p) = text
-            .lines()
-            .find_map(|l| l.strip_prefix("coordinator listening on tcp/127.0.0.1:"))
-            .and_then(|p| p.trim().parse().ok())
-        {
-            break p;
-        }
-        assert!(Instant::now() < deadline, "no endpoint: {text}");
-        std::thread::sleep(Duration::from_millis(10));
-    };
+    let port = listening_port(&stderr);
     let ws: Vec<Proc> = (0..2).map(|_| worker(port, 2, 20)).collect();
     while !plain(&std::fs::read_to_string(&stderr).unwrap_or_default()).contains("thread holds") {
         assert!(

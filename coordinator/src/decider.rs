@@ -12,7 +12,7 @@ use std::{collections::BTreeSet, sync::mpsc, thread::JoinHandle, time::Instant};
 
 use protocol::{
     measurement::Measurement,
-    wire::{Best, Control, IterationResult},
+    wire::{Best, Control, IterationResult, TrialOutcome},
     Experiment,
 };
 
@@ -105,21 +105,9 @@ pub fn result_of(run: &Run, d: &crate::evolve::DecidedIteration) -> IterationRes
 /// What the service asks of the run.
 #[derive(Debug)]
 pub enum Cmd {
-    /// Apply an outcome the service took (answer to the dispatch in flight, plausible).
-    Outcome {
-        /// Iteration.
-        iteration: u64,
-        /// Trial.
-        trial: u32,
-        /// Seed.
-        seed: u64,
-        /// The measurement.
-        measurement: Measurement,
-        /// The worker.
-        worker: String,
-        /// Handed back with the reply (the outcome to publish).
-        tag: u64,
-    },
+    /// Apply an outcome the service took (the answer to the dispatch in
+    /// flight, plausible, of the right seed); it comes back with the reply.
+    Outcome(Box<TrialOutcome>),
     /// Journal a failure of a trial on a worker.
     Failure {
         /// Iteration.
@@ -147,8 +135,8 @@ pub enum Cmd {
 pub enum Reply {
     /// An outcome was applied.
     Applied {
-        /// The command's tag.
-        tag: u64,
+        /// The outcome (to publish, now that it is journaled).
+        outcome: Box<TrialOutcome>,
         /// New or duplicate.
         counted: Counted,
         /// What follows from it.
@@ -249,12 +237,7 @@ fn hold_hook() -> Option<(u64, u64)> {
 /// `/proc/thread-self/stat` (Linux; clock ticks of 1/100 s). `None` elsewhere.
 #[must_use]
 pub fn thread_cpu_seconds() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/thread-self/stat").ok()?;
-    let rest = stat.rsplit_once(')')?.1;
-    let fields: Vec<&str> = rest.split_whitespace().collect();
-    let utime: f64 = fields.get(11)?.parse().ok()?;
-    let stime: f64 = fields.get(12)?.parse().ok()?;
-    Some((utime + stime) / 100.0)
+    crate::service::cpu_seconds_of("/proc/thread-self/stat")
 }
 
 fn serve(
@@ -276,18 +259,11 @@ fn serve(
             }
         }
         let reply = match cmd {
-            Cmd::Outcome {
-                iteration,
-                trial,
-                seed,
-                measurement,
-                worker,
-                tag,
-            } => {
+            Cmd::Outcome(o) => {
                 let clock = Instant::now();
-                match run.on_outcome(iteration, trial, seed, measurement, &worker) {
+                match run.on_outcome(o.iteration, o.trial, o.seed, o.measurement(), &o.worker) {
                     Ok((counted, fx)) => Reply::Applied {
-                        tag,
+                        outcome: o,
                         counted,
                         effects: effects(&run, fx),
                         snapshot: Box::new(Snapshot::of(&run)),

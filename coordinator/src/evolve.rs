@@ -50,6 +50,24 @@ pub struct DecidedIteration {
     pub best: Option<Incumbent>,
 }
 
+/// A history as bits (iterations, parameters, decisions and statistics), for
+/// comparing two histories exactly: equal bits, equal histories.
+#[must_use]
+pub fn history_bits(h: &[DecidedIteration]) -> Vec<u64> {
+    let mut v = Vec::new();
+    for d in h {
+        v.push(d.iteration);
+        v.extend(d.params.iter().map(|x| x.to_bits()));
+        v.push(d.decision as u64);
+        v.extend(
+            [d.stats.mx, d.stats.my, d.stats.ex, d.stats.ey]
+                .iter()
+                .map(|x| x.map_or(u64::MAX, f64::to_bits)),
+        );
+    }
+    v
+}
+
 /// A history imported from an earlier run (`--from RUN_DIR`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 pub struct Imported {

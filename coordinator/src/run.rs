@@ -996,19 +996,7 @@ mod tests {
     }
 
     fn bits(h: &[DecidedIteration]) -> Vec<u64> {
-        // Every number of the history, as bits, plus the decisions.
-        let mut v = Vec::new();
-        for d in h {
-            v.push(d.iteration);
-            v.extend(d.params.iter().map(|x| x.to_bits()));
-            v.push(d.decision as u64);
-            v.extend(
-                [d.stats.mx, d.stats.my, d.stats.ex, d.stats.ey]
-                    .iter()
-                    .map(|x| x.map_or(u64::MAX, f64::to_bits)),
-            );
-        }
-        v
+        crate::evolve::history_bits(h)
     }
 
     fn full_run(name: &str, shuffle_seed: Option<u64>) -> Vec<DecidedIteration> {

@@ -159,8 +159,6 @@ struct State {
     facts: Facts,
     /// Control queries waiting for the run's thread, by tag.
     ctl_waiting: HashMap<u64, zenoh::query::Query>,
-    /// Outcomes waiting for the run's thread, by tag (published once journaled).
-    outcome_waiting: HashMap<u64, TrialOutcome>,
     next_tag: u64,
     rkeys: RunKeys,
     fkeys: FleetKeys,
@@ -367,36 +365,38 @@ pub async fn serve(
             return Err(ServiceError::AlreadyServed { id });
         }
     }
-    let outcomes = session
-        .declare_subscriber(fkeys.outcomes())
-        .await
-        .map_err(zerr)?;
-    let failures = session
-        .declare_subscriber(fkeys.failures())
-        .await
-        .map_err(zerr)?;
-    let presence = session
-        .declare_subscriber(fkeys.presence())
-        .await
-        .map_err(zerr)?;
-    let live = session
-        .liveliness()
-        .declare_subscriber(keys::workers_all(&prefix))
-        .await
-        .map_err(zerr)?;
-    let work_q = session
-        .declare_queryable(fkeys.work())
-        .await
-        .map_err(zerr)?;
-    let ctl_q = session.declare_queryable(fkeys.ctl()).await.map_err(zerr)?;
-    let status_q = session
-        .declare_queryable(rkeys.status())
-        .await
-        .map_err(zerr)?;
-    let history_q = session
-        .declare_queryable(rkeys.history())
-        .await
-        .map_err(zerr)?;
+    let subs = Subscriptions {
+        outcomes: session
+            .declare_subscriber(fkeys.outcomes())
+            .await
+            .map_err(zerr)?,
+        failures: session
+            .declare_subscriber(fkeys.failures())
+            .await
+            .map_err(zerr)?,
+        presence: session
+            .declare_subscriber(fkeys.presence())
+            .await
+            .map_err(zerr)?,
+        live: session
+            .liveliness()
+            .declare_subscriber(keys::workers_all(&prefix))
+            .await
+            .map_err(zerr)?,
+        work_q: session
+            .declare_queryable(fkeys.work())
+            .await
+            .map_err(zerr)?,
+        ctl_q: session.declare_queryable(fkeys.ctl()).await.map_err(zerr)?,
+        status_q: session
+            .declare_queryable(rkeys.status())
+            .await
+            .map_err(zerr)?,
+        history_q: session
+            .declare_queryable(rkeys.history())
+            .await
+            .map_err(zerr)?,
+    };
     let _token = session
         .liveliness()
         .declare_token(keys::coordinator(&prefix, &id))
@@ -425,7 +425,6 @@ pub async fn serve(
         snap,
         facts,
         ctl_waiting: HashMap::new(),
-        outcome_waiting: HashMap::new(),
         next_tag: 0,
         sched: Scheduler::new(cfg.lease, cfg.silence),
         rkeys,
@@ -451,16 +450,7 @@ pub async fn serve(
         &mut st,
         effects,
         &mut replies,
-        Subscriptions {
-            outcomes,
-            failures,
-            presence,
-            live,
-            work_q,
-            ctl_q,
-            status_q,
-            history_q,
-        },
+        &subs,
         &mut shutdown,
         events.as_ref(),
     )
@@ -480,7 +470,9 @@ pub async fn serve(
     drop(replies);
     ended.map(|mut e| {
         match &mut e {
-            Ended::Finished(c) | Ended::Interrupted(c) | Ended::Stopped(c, _) => c.run_cpu_s = run_cpu,
+            Ended::Finished(c) | Ended::Interrupted(c) | Ended::Stopped(c, _) => {
+                c.run_cpu_s = run_cpu
+            }
         }
         e
     })
@@ -504,20 +496,10 @@ async fn serve_loop(
     st: &mut State,
     effects: Vec<Fx>,
     replies: &mut tokio::sync::mpsc::UnboundedReceiver<Reply>,
-    subs: Subscriptions,
+    subs: &Subscriptions,
     shutdown: &mut tokio::sync::watch::Receiver<bool>,
     events: Option<&tokio::sync::mpsc::UnboundedSender<Event>>,
 ) -> Result<Ended, ServiceError> {
-    let Subscriptions {
-        outcomes,
-        failures,
-        presence,
-        live,
-        work_q,
-        ctl_q,
-        status_q,
-        history_q,
-    } = subs;
     let id = st.facts.id.clone();
     handle_effects(session, st, effects, events).await?;
     advertise(session, st).await;
@@ -540,7 +522,7 @@ async fn serve_loop(
             advertise(session, st).await;
         }
         tokio::select! {
-            s = outcomes.recv_async() => {
+            s = subs.outcomes.recv_async() => {
                 let s = s.map_err(zerr)?;
                 let bytes = s.payload().to_bytes();
                 match TrialOutcome::decode(&bytes) {
@@ -549,7 +531,7 @@ async fn serve_loop(
                     Ok(o) => on_outcome(st, o)?,
                 }
             }
-            s = failures.recv_async() => {
+            s = subs.failures.recv_async() => {
                 let s = s.map_err(zerr)?;
                 match TrialFailure::decode(&s.payload().to_bytes()) {
                     Ok(f) if f.run == id => on_failure(st, &f)?,
@@ -557,33 +539,33 @@ async fn serve_loop(
                     Err(e) => st.refuse("an undecodable message", &format!("failure report: {e}")),
                 }
             }
-            s = presence.recv_async() => {
+            s = subs.presence.recv_async() => {
                 let s = s.map_err(zerr)?;
                 match WorkerPresence::decode(&s.payload().to_bytes()) {
                     Ok(p) => st.sched.worker_seen(&p.worker, Some(p.slots), Instant::now()),
                     Err(e) => st.refuse("an undecodable message", &format!("presence: {e}")),
                 }
             }
-            s = live.recv_async() => {
+            s = subs.live.recv_async() => {
                 let s = s.map_err(zerr)?;
                 if s.kind() == SampleKind::Delete {
                     let wid = keys::last_chunk(s.key_expr().as_str()).to_string();
                     st.gone.push((wid, Instant::now()));
                 }
             }
-            q = work_q.recv_async() => {
+            q = subs.work_q.recv_async() => {
                 let q = q.map_err(zerr)?;
                 on_work(st, &q).await;
             }
-            q = ctl_q.recv_async() => {
+            q = subs.ctl_q.recv_async() => {
                 let q = q.map_err(zerr)?;
                 on_ctl(st, q).await?;
             }
-            q = status_q.recv_async() => {
+            q = subs.status_q.recv_async() => {
                 let q = q.map_err(zerr)?;
                 reply_json(&q, st.status().to_json().map_err(|e| e.to_string())).await;
             }
-            q = history_q.recv_async() => {
+            q = subs.history_q.recv_async() => {
                 let q = q.map_err(zerr)?;
                 reply_json(&q, serde_json::to_string(&st.history).map_err(|e| e.to_string())).await;
             }
@@ -782,7 +764,7 @@ async fn on_reply(
 ) -> Result<(), ServiceError> {
     match reply {
         Reply::Applied {
-            tag,
+            outcome: o,
             counted,
             effects,
             snapshot,
@@ -790,15 +772,13 @@ async fn on_reply(
         } => {
             st.snap = *snapshot;
             st.counters.decide_s += took_s;
-            if let Some(o) = st.outcome_waiting.remove(&tag) {
-                match counted {
-                    Counted::New => {
-                        publish(session, &st.rkeys.trial(o.iteration, o.trial), &o).await
-                    }
-                    Counted::Duplicate => {
-                        st.counters.duplicates += 1;
-                        st.counters.accepted = st.counters.accepted.saturating_sub(1);
-                    }
+            match counted {
+                Counted::New => {
+                    publish(session, &st.rkeys.trial(o.iteration, o.trial), o.as_ref()).await;
+                }
+                Counted::Duplicate => {
+                    st.counters.duplicates += 1;
+                    st.counters.accepted = st.counters.accepted.saturating_sub(1);
                 }
             }
             handle_effects(session, st, effects, events).await?;
@@ -953,17 +933,7 @@ fn on_outcome(st: &mut State, o: TrialOutcome) -> Result<(), ServiceError> {
     st.ran_elsewhere(t, &o.worker);
     st.counters.accepted += 1;
     st.trials_done += 1;
-    let tag = st.tag();
-    st.send(Cmd::Outcome {
-        iteration: o.iteration,
-        trial: o.trial,
-        seed: o.seed,
-        measurement: o.measurement(),
-        worker: o.worker.clone(),
-        tag,
-    })?;
-    st.outcome_waiting.insert(tag, o);
-    Ok(())
+    st.send(Cmd::Outcome(Box::new(o)))
 }
 
 async fn handle_effects(
@@ -1010,7 +980,13 @@ async fn handle_effects(
 /// (Linux; clock ticks of 1/100 s, the kernel's USER_HZ). `None` elsewhere.
 #[must_use]
 pub fn process_cpu_seconds() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    cpu_seconds_of("/proc/self/stat")
+}
+
+/// CPU time (user + system) from a `stat` file of proc(5) (a process's or a thread's).
+#[must_use]
+pub fn cpu_seconds_of(path: &str) -> Option<f64> {
+    let stat = std::fs::read_to_string(path).ok()?;
     // Fields after the command name (which may hold spaces) closed by ')'.
     let rest = stat.rsplit_once(')')?.1;
     let fields: Vec<&str> = rest.split_whitespace().collect();

@@ -153,16 +153,5 @@ pub fn decided(
 
 /// A history as bits: iterations, parameters, decisions and statistics.
 pub fn bits(h: &[coordinator::evolve::DecidedIteration]) -> Vec<u64> {
-    let mut v = Vec::new();
-    for d in h {
-        v.push(d.iteration);
-        v.extend(d.params.iter().map(|x| x.to_bits()));
-        v.push(d.decision as u64);
-        v.extend(
-            [d.stats.mx, d.stats.my, d.stats.ex]
-                .iter()
-                .map(|x| x.map_or(u64::MAX, f64::to_bits)),
-        );
-    }
-    v
+    coordinator::evolve::history_bits(h)
 }
