@@ -60,12 +60,33 @@ pub enum Command {
     },
     /// A zenoh router inside naofarm (cluster use): runs, workers and watchers meet on it.
     Router {
-        /// Listen on this endpoint (repeatable; default tcp/0.0.0.0:7447).
+        /// Listen on this endpoint (repeatable; default tcp/0.0.0.0:7447, tls/0.0.0.0:7447 with --tls).
         #[arg(long = "listen", value_name = "ENDPOINT")]
         listen: Vec<String>,
         /// A zenoh configuration file in zenohd's json5 format; flags override it.
         #[arg(long = "config", value_name = "FILE")]
         config: Option<PathBuf>,
+        /// Mutual TLS with the router certificate in DIR (`naofarm certs DIR`).
+        #[arg(long, value_name = "DIR")]
+        tls: Option<PathBuf>,
+    },
+    /// Create a CA and one certificate per role (coordinator, worker, watcher, router) for --tls.
+    Certs {
+        /// Where the PEM files go (keys with mode 0600).
+        dir: PathBuf,
+        /// More certificates of a role, ROLE:NAME (repeatable), e.g. worker:node7.
+        #[arg(long = "name", value_name = "ROLE:NAME")]
+        names: Vec<String>,
+        /// Host names or addresses the servers (router, listening coordinator) are reached by
+        /// (repeatable; 127.0.0.1 and localhost are always in).
+        #[arg(long = "host", value_name = "HOST")]
+        hosts: Vec<String>,
+        /// Validity in days.
+        #[arg(long, default_value_t = 365)]
+        days: u32,
+        /// Replace existing files (keys included).
+        #[arg(long)]
+        force: bool,
     },
     /// Pause, resume, stop a run or change its priority, from any machine while it runs.
     Ctl {
@@ -300,6 +321,10 @@ pub struct NetArgs {
     /// Key prefix of every topic.
     #[arg(long, default_value = protocol::keys::DEFAULT_PREFIX)]
     pub prefix: String,
+    /// Mutual TLS with the certificates in DIR (`naofarm certs DIR`): the
+    /// command's role certificate and the CA; endpoints must be `tls/…`.
+    #[arg(long, value_name = "DIR")]
+    pub tls: Option<PathBuf>,
 }
 
 /// What a worker refuses to run (it gives such trials back with the reason).

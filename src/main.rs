@@ -69,7 +69,18 @@ fn dispatch(cli: Cli) -> Result<(), Failure> {
             heartbeat_ms,
             limits,
         } => commands::worker::worker(&net, slots, min_trial_ms, heartbeat_ms, &limits),
-        Command::Router { listen, config } => commands::router::router(&listen, config.as_deref()),
+        Command::Router {
+            listen,
+            config,
+            tls,
+        } => commands::router::router(&listen, config.as_deref(), tls),
+        Command::Certs {
+            dir,
+            names,
+            hosts,
+            days,
+            force,
+        } => commands::certs::certs(&dir, &names, &hosts, days, force),
         Command::Ctl {
             run,
             action,

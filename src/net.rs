@@ -13,7 +13,22 @@ impl NetArgs {
     /// naofarm finds its peers through explicit endpoints only, and a
     /// process that only connects (no endpoint to listen on) is a zenoh
     /// client: a peer without listeners behind a router is not routed to.
-    pub fn zenoh_config(&self, default_listen: &[&str]) -> anyhow::Result<zenoh::Config> {
+    pub fn zenoh_config(
+        &self,
+        role: &str,
+        default_listen: &[&str],
+    ) -> anyhow::Result<zenoh::Config> {
+        let tls_listen: Vec<String>;
+        let default_listen: Vec<&str> = if self.tls.is_some() {
+            tls_listen = default_listen
+                .iter()
+                .map(|e| e.replacen("tcp/", "tls/", 1))
+                .collect();
+            tls_listen.iter().map(String::as_str).collect()
+        } else {
+            default_listen.to_vec()
+        };
+        let default_listen = default_listen.as_slice();
         protocol::keys::check_chunk("prefix", &self.prefix).map_err(anyhow::Error::msg)?;
         let mut cfg = match &self.config {
             Some(p) => zenoh::Config::from_file(p)
@@ -55,13 +70,21 @@ impl NetArgs {
             cfg.insert_json5("connect/exit_on_failure", "false")
                 .map_err(|e| anyhow::anyhow!("connect: {e}"))?;
         }
+        if let Some(dir) = &self.tls {
+            tls(&mut cfg, dir, role)?;
+            for e in self.listen.iter().chain(&self.connect) {
+                if !e.starts_with("tls/") {
+                    anyhow::bail!("`{e}`: with --tls every endpoint is tls/HOST:PORT");
+                }
+            }
+        }
         Ok(cfg)
     }
 
     /// As [`NetArgs::zenoh_config`], for a command that gives up: connecting
     /// fails after `timeout_s` instead of waiting for the other end.
-    pub fn zenoh_config_within(&self, timeout_s: f64) -> anyhow::Result<zenoh::Config> {
-        let mut cfg = self.zenoh_config(&[])?;
+    pub fn zenoh_config_within(&self, role: &str, timeout_s: f64) -> anyhow::Result<zenoh::Config> {
+        let mut cfg = self.zenoh_config(role, &[])?;
         if self.config.is_none() {
             #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
             let ms = (timeout_s * 1000.0).ceil() as u64;
@@ -101,4 +124,36 @@ pub async fn open_asking(
             connect.join(", ")
         ))
     })
+}
+
+/// Mutual TLS for a session of `role` with the certificates in `dir`
+/// (`naofarm certs`): the CA, and the role's certificate and key for both
+/// the links it accepts and the links it opens.
+pub fn tls(cfg: &mut zenoh::Config, dir: &std::path::Path, role: &str) -> anyhow::Result<()> {
+    let file = |name: &str| -> anyhow::Result<String> {
+        let p = dir.join(name);
+        if !p.is_file() {
+            anyhow::bail!(
+                "--tls {}: no {name} (create the certificates with `naofarm certs {}`)",
+                dir.display(),
+                dir.display()
+            );
+        }
+        serde_json::to_string(&p.display().to_string()).map_err(anyhow::Error::from)
+    };
+    let ca = file("ca.pem")?;
+    let cert = file(&format!("{role}.pem"))?;
+    let key = file(&format!("{role}.key"))?;
+    for (k, v) in [
+        ("transport/link/tls/root_ca_certificate", ca.as_str()),
+        ("transport/link/tls/enable_mtls", "true"),
+        ("transport/link/tls/listen_certificate", cert.as_str()),
+        ("transport/link/tls/listen_private_key", key.as_str()),
+        ("transport/link/tls/connect_certificate", cert.as_str()),
+        ("transport/link/tls/connect_private_key", key.as_str()),
+    ] {
+        cfg.insert_json5(k, v)
+            .map_err(|e| anyhow::anyhow!("--tls: {k}: {e}"))?;
+    }
+    Ok(())
 }

@@ -336,3 +336,128 @@ fn a_worker_offered_far_more_than_its_slots_holds_its_slots_and_stops_at_once() 
         "the two given back, and nothing for silence: {f}"
     );
 }
+
+#[test]
+fn a_farm_over_mutual_tls_gives_the_local_history_and_refuses_strangers() {
+    let dir = scratch("fleet-tls");
+    let exp = experiment(&dir, "t.toml", "tls", 11, 8);
+    let want = alone(&dir, &exp, "alone");
+    let pki = dir.join("pki");
+    succeed(naofarm().arg("certs").arg(&pki));
+    for role in ["ca", "coordinator", "worker", "watcher", "router"] {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(pki.join(format!("{role}.key")))
+            .unwrap()
+            .permissions()
+            .mode();
+        assert_eq!(mode & 0o777, 0o600, "{role}.key is private");
+    }
+    // Never overwritten without --force.
+    let before = std::fs::read(pki.join("worker.key")).unwrap();
+    succeed(naofarm().arg("certs").arg(&pki));
+    assert_eq!(std::fs::read(pki.join("worker.key")).unwrap(), before);
+    let stranger = dir.join("other-pki");
+    succeed(naofarm().arg("certs").arg(&stranger));
+
+    let router = Proc::spawn(
+        naofarm()
+            .args(["router", "--listen", "tls/127.0.0.1:0", "--tls"])
+            .arg(&pki)
+            .stdout(Stdio::null()),
+        &dir,
+        "router",
+    );
+    let line = wait_line(&router, "router listening on tls/127.0.0.1:");
+    let ep = line.rsplit(' ').next().unwrap().trim().to_string();
+    // A plain TCP endpoint is refused with --tls (exit 2), before anything connects.
+    let err = fails(
+        naofarm()
+            .args(["worker", "--connect", "tcp/127.0.0.1:1", "--tls"])
+            .arg(&pki),
+        2,
+    );
+    assert!(err.contains("tls/HOST:PORT"), "{err}");
+    let out = dir.join("run");
+    let mut c = Proc::spawn(
+        naofarm()
+            .args(["coordinator", "--json", "--connect", &ep, "--tls"])
+            .arg(&pki)
+            .arg(&exp)
+            .arg("--out")
+            .arg(&out)
+            .stdout(std::fs::File::create(out.with_extension("stdout")).unwrap()),
+        &dir,
+        "coordinator",
+    );
+    // No certificate, or one from another CA: no connection at all.
+    for (what, tls) in [("no certificate", None), ("another CA", Some(&stranger))] {
+        let mut cmd = naofarm();
+        cmd.args(["watch", "--connect", &ep, "--timeout-s", "2"]);
+        if let Some(t) = tls {
+            cmd.arg("--tls").arg(t);
+        }
+        let err = fails(&mut cmd, 1);
+        assert!(err.contains("nothing answers"), "{what}: {err}");
+    }
+    // The watcher's certificate sees the run.
+    let listed = succeed(
+        naofarm()
+            .args([
+                "watch",
+                "--json",
+                "--connect",
+                &ep,
+                "--timeout-s",
+                "30",
+                "--tls",
+            ])
+            .arg(&pki),
+    );
+    assert!(
+        String::from_utf8_lossy(&listed.stdout).contains("\"run\":\"tls\""),
+        "{}",
+        String::from_utf8_lossy(&listed.stdout)
+    );
+    let tls_worker = |_| {
+        Proc::spawn(
+            naofarm()
+                .args(["worker", "--connect", &ep, "--slots", "2", "--tls"])
+                .arg(&pki)
+                .stdout(Stdio::null()),
+            &dir,
+            "worker",
+        )
+    };
+    let _ws: Vec<Proc> = (0..3).map(tls_worker).collect();
+    assert!(wait_exit(&mut c).success());
+    assert_eq!(
+        bits(&decided(&records(&out))),
+        want,
+        "the local run's history"
+    );
+}
+
+#[test]
+fn no_private_key_is_committed() {
+    let files = Command::new("git")
+        .args(["ls-files", "-z"])
+        .current_dir(root())
+        .output();
+    let Some(files) = files.ok().filter(|o| o.status.success()) else {
+        eprintln!("skipped: not a git checkout (git ls-files failed)");
+        return;
+    };
+    // The PEM marker of a private key, built so that this file does not hold it.
+    let marker = format!("{} KEY-----", "PRIVATE");
+    let mut checked = 0;
+    for f in files.stdout.split(|b| *b == 0).filter(|f| !f.is_empty()) {
+        let path = root().join(String::from_utf8_lossy(f).as_ref());
+        let Ok(text) = std::fs::read(&path) else {
+            continue;
+        };
+        checked += 1;
+        let found = text.windows(marker.len()).any(|w| w == marker.as_bytes());
+        assert!(!found, "{} holds a private key", path.display());
+    }
+    assert!(checked > 50, "only {checked} files read");
+}

@@ -16,7 +16,9 @@ pub fn coordinator(job: &JobArgs, net: &NetArgs, json: bool) -> Result<(), Failu
     } else {
         &[]
     };
-    let cfg = net.zenoh_config(default_listen).map_err(Failure::Usage)?;
+    let cfg = net
+        .zenoh_config("coordinator", default_listen)
+        .map_err(Failure::Usage)?;
     let (run, effects) = open_run(job)?;
     let rt = runtime()?;
     rt.block_on(async {

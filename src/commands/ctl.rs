@@ -53,7 +53,9 @@ pub fn ctl(run: &str, words: &[String], net: &NetArgs, timeout_s: f64) -> Result
     if net.connect.is_empty() && net.config.is_none() {
         net.connect.push("tcp/127.0.0.1:7447".into());
     }
-    let cfg = net.zenoh_config_within(timeout_s).map_err(Failure::Usage)?;
+    let cfg = net
+        .zenoh_config_within("watcher", timeout_s)
+        .map_err(Failure::Usage)?;
     let rt = runtime()?;
     rt.block_on(async {
         let session = crate::net::open_asking(cfg, &net.connect).await?;

@@ -3,6 +3,7 @@
 
 pub mod bench;
 pub mod bench_fleet;
+pub mod certs;
 pub mod check;
 pub mod clop;
 pub mod coordinator;

@@ -7,15 +7,20 @@ use anyhow::anyhow;
 use crate::{args::NetArgs, common::Failure, net::open_session, serve::runtime};
 
 /// `naofarm router`.
-pub fn router(listen: &[String], config: Option<&std::path::Path>) -> Result<(), Failure> {
+pub fn router(
+    listen: &[String],
+    config: Option<&std::path::Path>,
+    tls: Option<std::path::PathBuf>,
+) -> Result<(), Failure> {
     let net = NetArgs {
         listen: listen.to_vec(),
         config: config.map(std::path::Path::to_path_buf),
         prefix: protocol::keys::DEFAULT_PREFIX.to_string(),
+        tls,
         ..NetArgs::default()
     };
     let mut cfg = net
-        .zenoh_config(&["tcp/0.0.0.0:7447"])
+        .zenoh_config("router", &["tcp/0.0.0.0:7447"])
         .map_err(Failure::Usage)?;
     cfg.insert_json5("mode", "\"router\"")
         .map_err(|e| Failure::Usage(anyhow!("mode: {e}")))?;

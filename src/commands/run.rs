@@ -43,7 +43,9 @@ pub fn run(
         prefix: protocol::keys::DEFAULT_PREFIX.to_string(),
         ..NetArgs::default()
     };
-    let ccfg = coord_net.zenoh_config(&[]).map_err(Failure::Job)?;
+    let ccfg = coord_net
+        .zenoh_config("coordinator", &[])
+        .map_err(Failure::Job)?;
     let (run, effects) = open_run(job)?;
     let rt = runtime()?;
     rt.block_on(async {
@@ -62,12 +64,13 @@ pub fn run(
             listen: vec![],
             prefix: protocol::keys::DEFAULT_PREFIX.to_string(),
             config: None,
+            tls: None,
         };
         let shutdown = signals();
         let mut handles = Vec::new();
         let mut worker_sessions = Vec::new();
         for _ in 0..n {
-            let wcfg = worker_net.zenoh_config(&[]).map_err(Failure::Job)?;
+            let wcfg = worker_net.zenoh_config("worker", &[]).map_err(Failure::Job)?;
             let ws = open_session(wcfg).await?;
             worker_sessions.push(ws.clone());
             let cfg = worker::service::WorkerConfig {

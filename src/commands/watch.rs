@@ -71,7 +71,7 @@ pub fn watch(a: &WatchArgs) -> Result<(), Failure> {
         net.connect.push(DEFAULT_CONNECT.to_string());
     }
     let cfg = net
-        .zenoh_config_within(a.timeout_s)
+        .zenoh_config_within("watcher", a.timeout_s)
         .map_err(Failure::Usage)?;
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)

@@ -41,7 +41,7 @@ pub fn worker(
             "--min-trial-ms {min_trial_ms}: must be at most 3600000"
         )));
     }
-    let cfg = net.zenoh_config(&[]).map_err(Failure::Usage)?;
+    let cfg = net.zenoh_config("worker", &[]).map_err(Failure::Usage)?;
     let mut wcfg = worker::service::WorkerConfig {
         prefix: net.prefix.clone(),
         min_trial: Duration::from_millis(min_trial_ms),
