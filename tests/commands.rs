@@ -514,7 +514,13 @@ fn the_nao_farm_gives_the_same_history_with_one_or_two_workers() {
 
 #[test]
 fn deploy_configs_are_valid_zenoh_configs() {
-    for f in ["router", "coordinator", "worker", "tls/router", "tls/worker"] {
+    for f in [
+        "router",
+        "coordinator",
+        "worker",
+        "tls/router",
+        "tls/worker",
+    ] {
         let path = root().join(format!("deploy/{f}.json5"));
         if let Err(e) = zenoh::Config::from_file(&path) {
             panic!("{}: {e}", path.display());

@@ -461,3 +461,144 @@ fn no_private_key_is_committed() {
     }
     assert!(checked > 50, "only {checked} files read");
 }
+
+/// A zenoh client of `ep` with the certificate of `role` from `pki`.
+fn tls_session(ep: &str, pki: &Path, role: &str) -> zenoh::Session {
+    use zenoh::Wait;
+    let mut cfg = zenoh::Config::default();
+    let f = |n: &str| serde_json::to_string(&pki.join(n).display().to_string()).unwrap();
+    for (k, v) in [
+        ("mode", "\"client\"".to_string()),
+        ("scouting/multicast/enabled", "false".to_string()),
+        ("connect/endpoints", format!("[\"{ep}\"]")),
+        ("transport/link/tls/root_ca_certificate", f("ca.pem")),
+        ("transport/link/tls/enable_mtls", "true".to_string()),
+        (
+            "transport/link/tls/connect_certificate",
+            f(&format!("{role}.pem")),
+        ),
+        (
+            "transport/link/tls/connect_private_key",
+            f(&format!("{role}.key")),
+        ),
+    ] {
+        cfg.insert_json5(k, &v).unwrap();
+    }
+    zenoh::open(cfg).wait().unwrap()
+}
+
+#[test]
+fn the_router_lets_each_role_say_only_its_part() {
+    use zenoh::Wait;
+    let dir = scratch("fleet-acl");
+    let pki = dir.join("pki");
+    succeed(naofarm().arg("certs").arg(&pki));
+    let router = Proc::spawn(
+        naofarm()
+            .args(["router", "--listen", "tls/127.0.0.1:0", "--tls"])
+            .arg(&pki)
+            .stdout(Stdio::null()),
+        &dir,
+        "router",
+    );
+    let line = wait_line(&router, "router listening on tls/127.0.0.1:");
+    let ep = line.rsplit(' ').next().unwrap().trim().to_string();
+    // A coordinator's session hears its run's heartbeats; a watcher's, the run's status.
+    let coord = tls_session(&ep, &pki, "coordinator");
+    let watcher = tls_session(&ep, &pki, "watcher");
+    let (ptx, prx) = std::sync::mpsc::channel::<String>();
+    let (stx, srx) = std::sync::mpsc::channel::<String>();
+    let text =
+        |s: &zenoh::sample::Sample| String::from_utf8_lossy(&s.payload().to_bytes()).into_owned();
+    let _presence = coord
+        .declare_subscriber("naofarm/@runs/r1/presence")
+        .callback(move |s| {
+            let _ = ptx.send(text(&s));
+        })
+        .wait()
+        .unwrap();
+    let _status = watcher
+        .declare_subscriber("naofarm/x/r1/status")
+        .callback(move |s| {
+            let _ = stx.send(text(&s));
+        })
+        .wait()
+        .unwrap();
+    // A coordinator may publish a status, and the watcher hears it.
+    let publisher = tls_session(&ep, &pki, "coordinator");
+    let until = |rx: &std::sync::mpsc::Receiver<String>, want: &str, send: &dyn Fn()| {
+        let deadline = Instant::now() + TIMEOUT;
+        let mut seen = Vec::new();
+        loop {
+            send();
+            if let Ok(t) = rx.recv_timeout(Duration::from_millis(200)) {
+                let done = t == want;
+                seen.push(t);
+                if done {
+                    return seen;
+                }
+            }
+            assert!(
+                Instant::now() < deadline,
+                "`{want}` never arrived: {seen:?}"
+            );
+        }
+    };
+    until(&srx, "real 1", &|| {
+        publisher
+            .put("naofarm/x/r1/status", "real 1")
+            .wait()
+            .unwrap()
+    });
+    // A worker forges a status (denied) and then sends a heartbeat (allowed);
+    // another watcher forges one too (a session's own subscribers would get
+    // its puts locally: that one never leaves it).
+    let worker = tls_session(&ep, &pki, "worker");
+    let other_watcher = tls_session(&ep, &pki, "watcher");
+    until(&prx, "heartbeat", &|| {
+        other_watcher
+            .put("naofarm/x/r1/status", "forged by a watcher")
+            .wait()
+            .unwrap();
+        worker
+            .put("naofarm/x/r1/status", "forged by a worker")
+            .wait()
+            .unwrap();
+        worker
+            .put("naofarm/@runs/r1/presence", "heartbeat")
+            .wait()
+            .unwrap();
+    });
+    // Once the coordinator's next status has arrived too, no forged one has.
+    let seen = until(&srx, "real 2", &|| {
+        publisher
+            .put("naofarm/x/r1/status", "real 2")
+            .wait()
+            .unwrap()
+    });
+    assert!(
+        !seen.iter().any(|t| t.starts_with("forged")),
+        "a forged status reached the watcher: {seen:?}"
+    );
+    // A worker cannot subscribe to another run's work or outcomes either.
+    let (otx, orx) = std::sync::mpsc::channel::<String>();
+    let _spy = worker
+        .declare_subscriber("naofarm/@runs/r1/outcomes")
+        .callback(move |s| {
+            let _ = otx.send(text(&s));
+        })
+        .wait()
+        .unwrap();
+    let other_worker = tls_session(&ep, &pki, "worker");
+    until(&prx, "heartbeat 2", &|| {
+        other_worker
+            .put("naofarm/@runs/r1/outcomes", "an outcome")
+            .wait()
+            .unwrap();
+        other_worker
+            .put("naofarm/@runs/r1/presence", "heartbeat 2")
+            .wait()
+            .unwrap();
+    });
+    assert!(orx.try_recv().is_err(), "a worker heard outcomes");
+}
