@@ -87,6 +87,9 @@ pub enum Command {
         /// Replace existing files (keys included).
         #[arg(long)]
         force: bool,
+        /// Test hook: certificates that expired yesterday (the CA stays valid).
+        #[arg(long, hide = true)]
+        expired: bool,
     },
     /// Pause, resume, stop a run or change its priority, from any machine while it runs.
     Ctl {

@@ -80,7 +80,8 @@ fn dispatch(cli: Cli) -> Result<(), Failure> {
             hosts,
             days,
             force,
-        } => commands::certs::certs(&dir, &names, &hosts, days, force),
+            expired,
+        } => commands::certs::certs(&dir, &names, &hosts, days, force, expired),
         Command::Ctl {
             run,
             action,

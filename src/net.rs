@@ -157,3 +157,195 @@ pub fn tls(cfg: &mut zenoh::Config, dir: &std::path::Path, role: &str) -> anyhow
     }
     Ok(())
 }
+
+/// The router's access control by role (a certificate's common name): each
+/// role may send and receive only what its part of the fleet design needs.
+/// Work reaches only the worker that asked (a query's reply goes only to its
+/// querier), so workers need no per-worker rules.
+#[must_use]
+pub fn acl(prefix: &str) -> String {
+    let p = prefix;
+    let runs = |k: &str| format!("{p}/@runs/*/{k}");
+    let public = |k: &str| format!("{p}/*/*/{k}");
+    // (role, flow, messages, keys)
+    let rules: Vec<(&str, &str, &[&str], Vec<String>)> = vec![
+        // A worker: puts outcomes, failures, heartbeats; asks for work; holds its token; hears adverts.
+        (
+            "worker",
+            "ingress",
+            &["put"],
+            vec![runs("outcomes"), runs("failures"), runs("presence")],
+        ),
+        ("worker", "ingress", &["query"], vec![runs("work")]),
+        ("worker", "egress", &["reply"], vec![runs("work")]),
+        (
+            "worker",
+            "ingress",
+            &["liveliness_token"],
+            vec![format!("{p}/@workers/*")],
+        ),
+        (
+            "worker",
+            "ingress",
+            &["declare_subscriber"],
+            vec![runs("ad")],
+        ),
+        ("worker", "egress", &["put"], vec![runs("ad")]),
+        // A coordinator: hears its fleet keys, answers work, ctl, status and history,
+        // publishes the watched topics and its advert, holds its token, watches workers' tokens.
+        (
+            "coordinator",
+            "ingress",
+            &["declare_subscriber"],
+            vec![runs("outcomes"), runs("failures"), runs("presence")],
+        ),
+        (
+            "coordinator",
+            "egress",
+            &["put"],
+            vec![runs("outcomes"), runs("failures"), runs("presence")],
+        ),
+        (
+            "coordinator",
+            "ingress",
+            &["declare_queryable", "reply"],
+            vec![
+                runs("work"),
+                runs("ctl"),
+                public("status"),
+                public("history"),
+            ],
+        ),
+        (
+            "coordinator",
+            "egress",
+            &["query"],
+            vec![
+                runs("work"),
+                runs("ctl"),
+                public("status"),
+                public("history"),
+            ],
+        ),
+        (
+            "coordinator",
+            "ingress",
+            &["put"],
+            vec![
+                runs("ad"),
+                public("params/*"),
+                public("trials/**"),
+                public("results/*"),
+                public("status"),
+            ],
+        ),
+        (
+            "coordinator",
+            "ingress",
+            &["liveliness_token", "liveliness_query"],
+            vec![format!("{p}/@coordinators/*")],
+        ),
+        (
+            "coordinator",
+            "egress",
+            &["liveliness_token"],
+            vec![format!("{p}/@coordinators/*"), format!("{p}/@workers/*")],
+        ),
+        (
+            "coordinator",
+            "ingress",
+            &["declare_liveliness_subscriber"],
+            vec![format!("{p}/@workers/*")],
+        ),
+        // `naofarm ctl` runs with the coordinator's certificate: it asks runs.
+        (
+            "coordinator",
+            "ingress",
+            &["query"],
+            vec![runs("ctl"), public("status")],
+        ),
+        (
+            "coordinator",
+            "egress",
+            &["reply"],
+            vec![runs("ctl"), public("status")],
+        ),
+        // A watcher: subscribes to and queries the public topics, follows coordinators' tokens.
+        (
+            "watcher",
+            "ingress",
+            &["declare_subscriber"],
+            vec![
+                public("params/*"),
+                public("trials/**"),
+                public("results/*"),
+                public("status"),
+            ],
+        ),
+        (
+            "watcher",
+            "egress",
+            &["put"],
+            vec![
+                public("params/*"),
+                public("trials/**"),
+                public("results/*"),
+                public("status"),
+            ],
+        ),
+        (
+            "watcher",
+            "ingress",
+            &["query"],
+            vec![public("status"), public("history")],
+        ),
+        (
+            "watcher",
+            "egress",
+            &["reply"],
+            vec![public("status"), public("history")],
+        ),
+        (
+            "watcher",
+            "ingress",
+            &["declare_liveliness_subscriber"],
+            vec![format!("{p}/@coordinators/*")],
+        ),
+        (
+            "watcher",
+            "egress",
+            &["liveliness_token"],
+            vec![format!("{p}/@coordinators/*")],
+        ),
+    ];
+    let mut rule_json = Vec::new();
+    let mut policies: std::collections::BTreeMap<&str, Vec<String>> =
+        std::collections::BTreeMap::new();
+    for (i, (role, flow, messages, keys)) in rules.iter().enumerate() {
+        let id = format!("r{i}_{role}");
+        rule_json.push(serde_json::json!({
+            "id": id,
+            "permission": "allow",
+            "flows": [flow],
+            "messages": messages,
+            "key_exprs": keys,
+        }));
+        policies.entry(role).or_default().push(id);
+    }
+    let subjects: Vec<serde_json::Value> = policies
+        .keys()
+        .map(|r| serde_json::json!({"id": r, "cert_common_names": [r]}))
+        .collect();
+    let policy_json: Vec<serde_json::Value> = policies
+        .iter()
+        .map(|(r, ids)| serde_json::json!({"id": format!("p_{r}"), "subjects": [r], "rules": ids}))
+        .collect();
+    serde_json::json!({
+        "enabled": true,
+        "default_permission": "deny",
+        "rules": rule_json,
+        "subjects": subjects,
+        "policies": policy_json,
+    })
+    .to_string()
+}

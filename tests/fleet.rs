@@ -358,6 +358,13 @@ fn a_farm_over_mutual_tls_gives_the_local_history_and_refuses_strangers() {
     assert_eq!(std::fs::read(pki.join("worker.key")).unwrap(), before);
     let stranger = dir.join("other-pki");
     succeed(naofarm().arg("certs").arg(&stranger));
+    // Certificates of the same CA that expired yesterday (a hidden test hook).
+    let expired = dir.join("expired-pki");
+    std::fs::create_dir_all(&expired).unwrap();
+    for f in ["ca.pem", "ca.key"] {
+        std::fs::copy(pki.join(f), expired.join(f)).unwrap();
+    }
+    succeed(naofarm().arg("certs").arg(&expired).arg("--expired"));
 
     let router = Proc::spawn(
         naofarm()
@@ -390,7 +397,11 @@ fn a_farm_over_mutual_tls_gives_the_local_history_and_refuses_strangers() {
         "coordinator",
     );
     // No certificate, or one from another CA: no connection at all.
-    for (what, tls) in [("no certificate", None), ("another CA", Some(&stranger))] {
+    for (what, tls) in [
+        ("no certificate", None),
+        ("another CA", Some(&stranger)),
+        ("an expired certificate", Some(&expired)),
+    ] {
         let mut cmd = naofarm();
         cmd.args(["watch", "--connect", &ep, "--timeout-s", "2"]);
         if let Some(t) = tls {

@@ -73,6 +73,7 @@ pub fn certs(
     hosts: &[String],
     days: u32,
     force: bool,
+    expired: bool,
 ) -> Result<(), Failure> {
     if days == 0 || days > 3650 {
         return Err(Failure::Usage(anyhow!(
@@ -156,6 +157,11 @@ pub fn certs(
         ];
         p.key_usages = vec![KeyUsagePurpose::DigitalSignature];
         validity(&mut p, days);
+        if expired {
+            let now = time::OffsetDateTime::now_utc();
+            p.not_before = now - time::Duration::days(2);
+            p.not_after = now - time::Duration::days(1);
+        }
         let cert = p.signed_by(&k, &issuer).map_err(rc)?;
         write(&key, &k.serialize_pem(), true, force)?;
         write(&pem, &cert.pem(), false, force)?;
