@@ -161,163 +161,59 @@ pub fn tls(cfg: &mut zenoh::Config, dir: &std::path::Path, role: &str) -> anyhow
 /// The router's access control by role (a certificate's common name): each
 /// role may send and receive only what its part of the fleet design needs.
 /// Work reaches only the worker that asked (a query's reply goes only to its
-/// querier), so workers need no per-worker rules.
+/// querier), so workers need no per-worker rules. One rule per line: role,
+/// flow, messages, keys (`runs/K` is `<prefix>/@runs/*/K`, `pub/K` is
+/// `<prefix>/*/*/K`, `@…` is `<prefix>/@…`).
+const ACL_RULES: &str = "\
+worker      ingress put                                runs/outcomes runs/failures runs/presence
+worker      ingress query                              runs/work
+worker      egress  reply                              runs/work
+worker      ingress liveliness_token                   @workers/*
+worker      ingress declare_subscriber                 runs/ad
+worker      egress  put                                runs/ad
+coordinator ingress declare_subscriber                 runs/outcomes runs/failures runs/presence
+coordinator egress  put                                runs/outcomes runs/failures runs/presence
+coordinator ingress declare_queryable,reply            runs/work runs/ctl pub/status pub/history
+coordinator egress  query                              runs/work runs/ctl pub/status pub/history
+coordinator ingress put                                runs/ad pub/params/* pub/trials/** pub/results/* pub/status
+coordinator ingress liveliness_token,liveliness_query  @coordinators/*
+coordinator egress  liveliness_token                   @coordinators/* @workers/*
+coordinator ingress declare_liveliness_subscriber      @workers/*
+coordinator ingress query                              runs/ctl pub/status
+coordinator egress  reply                              runs/ctl pub/status
+watcher     ingress declare_subscriber                 pub/params/* pub/trials/** pub/results/* pub/status
+watcher     egress  put                                pub/params/* pub/trials/** pub/results/* pub/status
+watcher     ingress query                              pub/status pub/history
+watcher     egress  reply                              pub/status pub/history
+watcher     ingress declare_liveliness_subscriber      @coordinators/*
+watcher     egress  liveliness_token                   @coordinators/*
+";
+
+/// [`ACL_RULES`] as zenoh's `access_control` configuration (JSON), under `prefix`.
 #[must_use]
 pub fn acl(prefix: &str) -> String {
-    let p = prefix;
-    let runs = |k: &str| format!("{p}/@runs/*/{k}");
-    let public = |k: &str| format!("{p}/*/*/{k}");
-    // (role, flow, messages, keys)
-    let rules: Vec<(&str, &str, &[&str], Vec<String>)> = vec![
-        // A worker: puts outcomes, failures, heartbeats; asks for work; holds its token; hears adverts.
-        (
-            "worker",
-            "ingress",
-            &["put"],
-            vec![runs("outcomes"), runs("failures"), runs("presence")],
-        ),
-        ("worker", "ingress", &["query"], vec![runs("work")]),
-        ("worker", "egress", &["reply"], vec![runs("work")]),
-        (
-            "worker",
-            "ingress",
-            &["liveliness_token"],
-            vec![format!("{p}/@workers/*")],
-        ),
-        (
-            "worker",
-            "ingress",
-            &["declare_subscriber"],
-            vec![runs("ad")],
-        ),
-        ("worker", "egress", &["put"], vec![runs("ad")]),
-        // A coordinator: hears its fleet keys, answers work, ctl, status and history,
-        // publishes the watched topics and its advert, holds its token, watches workers' tokens.
-        (
-            "coordinator",
-            "ingress",
-            &["declare_subscriber"],
-            vec![runs("outcomes"), runs("failures"), runs("presence")],
-        ),
-        (
-            "coordinator",
-            "egress",
-            &["put"],
-            vec![runs("outcomes"), runs("failures"), runs("presence")],
-        ),
-        (
-            "coordinator",
-            "ingress",
-            &["declare_queryable", "reply"],
-            vec![
-                runs("work"),
-                runs("ctl"),
-                public("status"),
-                public("history"),
-            ],
-        ),
-        (
-            "coordinator",
-            "egress",
-            &["query"],
-            vec![
-                runs("work"),
-                runs("ctl"),
-                public("status"),
-                public("history"),
-            ],
-        ),
-        (
-            "coordinator",
-            "ingress",
-            &["put"],
-            vec![
-                runs("ad"),
-                public("params/*"),
-                public("trials/**"),
-                public("results/*"),
-                public("status"),
-            ],
-        ),
-        (
-            "coordinator",
-            "ingress",
-            &["liveliness_token", "liveliness_query"],
-            vec![format!("{p}/@coordinators/*")],
-        ),
-        (
-            "coordinator",
-            "egress",
-            &["liveliness_token"],
-            vec![format!("{p}/@coordinators/*"), format!("{p}/@workers/*")],
-        ),
-        (
-            "coordinator",
-            "ingress",
-            &["declare_liveliness_subscriber"],
-            vec![format!("{p}/@workers/*")],
-        ),
-        // `naofarm ctl` runs with the coordinator's certificate: it asks runs.
-        (
-            "coordinator",
-            "ingress",
-            &["query"],
-            vec![runs("ctl"), public("status")],
-        ),
-        (
-            "coordinator",
-            "egress",
-            &["reply"],
-            vec![runs("ctl"), public("status")],
-        ),
-        // A watcher: subscribes to and queries the public topics, follows coordinators' tokens.
-        (
-            "watcher",
-            "ingress",
-            &["declare_subscriber"],
-            vec![
-                public("params/*"),
-                public("trials/**"),
-                public("results/*"),
-                public("status"),
-            ],
-        ),
-        (
-            "watcher",
-            "egress",
-            &["put"],
-            vec![
-                public("params/*"),
-                public("trials/**"),
-                public("results/*"),
-                public("status"),
-            ],
-        ),
-        (
-            "watcher",
-            "ingress",
-            &["query"],
-            vec![public("status"), public("history")],
-        ),
-        (
-            "watcher",
-            "egress",
-            &["reply"],
-            vec![public("status"), public("history")],
-        ),
-        (
-            "watcher",
-            "ingress",
-            &["declare_liveliness_subscriber"],
-            vec![format!("{p}/@coordinators/*")],
-        ),
-        (
-            "watcher",
-            "egress",
-            &["liveliness_token"],
-            vec![format!("{p}/@coordinators/*")],
-        ),
-    ];
+    let key = |k: &str| {
+        if let Some(rest) = k.strip_prefix("runs/") {
+            format!("{prefix}/@runs/*/{rest}")
+        } else if let Some(rest) = k.strip_prefix("pub/") {
+            format!("{prefix}/*/*/{rest}")
+        } else {
+            format!("{prefix}/{k}")
+        }
+    };
+    let rules: Vec<(&str, &str, Vec<&str>, Vec<String>)> = ACL_RULES
+        .lines()
+        .filter_map(|l| {
+            let mut w = l.split_whitespace();
+            let (role, flow, messages) = (w.next()?, w.next()?, w.next()?);
+            Some((
+                role,
+                flow,
+                messages.split(',').collect(),
+                w.map(key).collect(),
+            ))
+        })
+        .collect();
     let mut rule_json = Vec::new();
     let mut policies: std::collections::BTreeMap<&str, Vec<String>> =
         std::collections::BTreeMap::new();

@@ -41,18 +41,24 @@ fn wait_line(p: &Proc, needle: &str) -> String {
     }
 }
 
-/// A `naofarm router` on a port the OS picks; its endpoint, read from the router itself.
-fn router(dir: &Path) -> (Proc, String) {
-    let p = Proc::spawn(
-        naofarm()
-            .args(["router", "--listen", "tcp/127.0.0.1:0"])
-            .stdout(Stdio::null()),
-        dir,
-        "router",
-    );
-    let line = wait_line(&p, "router listening on tcp/127.0.0.1:");
+/// A `naofarm router` on a port the OS picks (over mutual TLS with the
+/// certificates in `tls`); its endpoint, read from the router itself.
+fn router_with(dir: &Path, tls: Option<&Path>) -> (Proc, String) {
+    let scheme = if tls.is_some() { "tls" } else { "tcp" };
+    let mut cmd = naofarm();
+    cmd.args(["router", "--listen", &format!("{scheme}/127.0.0.1:0")])
+        .stdout(Stdio::null());
+    if let Some(pki) = tls {
+        cmd.arg("--tls").arg(pki);
+    }
+    let p = Proc::spawn(&mut cmd, dir, "router");
+    let line = wait_line(&p, &format!("router listening on {scheme}/127.0.0.1:"));
     let endpoint = line.rsplit(' ').next().unwrap().trim().to_string();
     (p, endpoint)
+}
+
+fn router(dir: &Path) -> (Proc, String) {
+    router_with(dir, None)
 }
 
 fn coordinator(dir: &Path, exp: &Path, out: &Path, ep: &str, priority: u32) -> Proc {
@@ -366,16 +372,7 @@ fn a_farm_over_mutual_tls_gives_the_local_history_and_refuses_strangers() {
     }
     succeed(naofarm().arg("certs").arg(&expired).arg("--expired"));
 
-    let router = Proc::spawn(
-        naofarm()
-            .args(["router", "--listen", "tls/127.0.0.1:0", "--tls"])
-            .arg(&pki)
-            .stdout(Stdio::null()),
-        &dir,
-        "router",
-    );
-    let line = wait_line(&router, "router listening on tls/127.0.0.1:");
-    let ep = line.rsplit(' ').next().unwrap().trim().to_string();
+    let (_router, ep) = router_with(&dir, Some(&pki));
     // A plain TCP endpoint is refused with --tls (exit 2), before anything connects.
     let err = fails(
         naofarm()
@@ -473,6 +470,26 @@ fn no_private_key_is_committed() {
     assert!(checked > 50, "only {checked} files read");
 }
 
+/// The payloads `session` receives on `key`, as text.
+fn heard(
+    session: &zenoh::Session,
+    key: &str,
+) -> (
+    zenoh::pubsub::Subscriber<()>,
+    std::sync::mpsc::Receiver<String>,
+) {
+    use zenoh::Wait;
+    let (tx, rx) = std::sync::mpsc::channel::<String>();
+    let sub = session
+        .declare_subscriber(key)
+        .callback(move |s| {
+            let _ = tx.send(String::from_utf8_lossy(&s.payload().to_bytes()).into_owned());
+        })
+        .wait()
+        .unwrap();
+    (sub, rx)
+}
+
 /// A zenoh client of `ep` with the certificate of `role` from `pki`.
 fn tls_session(ep: &str, pki: &Path, role: &str) -> zenoh::Session {
     use zenoh::Wait;
@@ -504,37 +521,12 @@ fn the_router_lets_each_role_say_only_its_part() {
     let dir = scratch("fleet-acl");
     let pki = dir.join("pki");
     succeed(naofarm().arg("certs").arg(&pki));
-    let router = Proc::spawn(
-        naofarm()
-            .args(["router", "--listen", "tls/127.0.0.1:0", "--tls"])
-            .arg(&pki)
-            .stdout(Stdio::null()),
-        &dir,
-        "router",
-    );
-    let line = wait_line(&router, "router listening on tls/127.0.0.1:");
-    let ep = line.rsplit(' ').next().unwrap().trim().to_string();
+    let (_router, ep) = router_with(&dir, Some(&pki));
     // A coordinator's session hears its run's heartbeats; a watcher's, the run's status.
     let coord = tls_session(&ep, &pki, "coordinator");
     let watcher = tls_session(&ep, &pki, "watcher");
-    let (ptx, prx) = std::sync::mpsc::channel::<String>();
-    let (stx, srx) = std::sync::mpsc::channel::<String>();
-    let text =
-        |s: &zenoh::sample::Sample| String::from_utf8_lossy(&s.payload().to_bytes()).into_owned();
-    let _presence = coord
-        .declare_subscriber("naofarm/@runs/r1/presence")
-        .callback(move |s| {
-            let _ = ptx.send(text(&s));
-        })
-        .wait()
-        .unwrap();
-    let _status = watcher
-        .declare_subscriber("naofarm/x/r1/status")
-        .callback(move |s| {
-            let _ = stx.send(text(&s));
-        })
-        .wait()
-        .unwrap();
+    let (_presence, prx) = heard(&coord, "naofarm/@runs/r1/presence");
+    let (_status, srx) = heard(&watcher, "naofarm/x/r1/status");
     // A coordinator may publish a status, and the watcher hears it.
     let publisher = tls_session(&ep, &pki, "coordinator");
     let until = |rx: &std::sync::mpsc::Receiver<String>, want: &str, send: &dyn Fn()| {
@@ -566,50 +558,26 @@ fn the_router_lets_each_role_say_only_its_part() {
     // its puts locally: that one never leaves it).
     let worker = tls_session(&ep, &pki, "worker");
     let other_watcher = tls_session(&ep, &pki, "watcher");
+    let put = |s: &zenoh::Session, key: &str, text: &str| s.put(key, text).wait().unwrap();
     until(&prx, "heartbeat", &|| {
-        other_watcher
-            .put("naofarm/x/r1/status", "forged by a watcher")
-            .wait()
-            .unwrap();
-        worker
-            .put("naofarm/x/r1/status", "forged by a worker")
-            .wait()
-            .unwrap();
-        worker
-            .put("naofarm/@runs/r1/presence", "heartbeat")
-            .wait()
-            .unwrap();
+        put(&other_watcher, "naofarm/x/r1/status", "forged by a watcher");
+        put(&worker, "naofarm/x/r1/status", "forged by a worker");
+        put(&worker, "naofarm/@runs/r1/presence", "heartbeat");
     });
     // Once the coordinator's next status has arrived too, no forged one has.
     let seen = until(&srx, "real 2", &|| {
-        publisher
-            .put("naofarm/x/r1/status", "real 2")
-            .wait()
-            .unwrap()
+        put(&publisher, "naofarm/x/r1/status", "real 2");
     });
     assert!(
         !seen.iter().any(|t| t.starts_with("forged")),
         "a forged status reached the watcher: {seen:?}"
     );
     // A worker cannot subscribe to another run's work or outcomes either.
-    let (otx, orx) = std::sync::mpsc::channel::<String>();
-    let _spy = worker
-        .declare_subscriber("naofarm/@runs/r1/outcomes")
-        .callback(move |s| {
-            let _ = otx.send(text(&s));
-        })
-        .wait()
-        .unwrap();
+    let (_spy, orx) = heard(&worker, "naofarm/@runs/r1/outcomes");
     let other_worker = tls_session(&ep, &pki, "worker");
     until(&prx, "heartbeat 2", &|| {
-        other_worker
-            .put("naofarm/@runs/r1/outcomes", "an outcome")
-            .wait()
-            .unwrap();
-        other_worker
-            .put("naofarm/@runs/r1/presence", "heartbeat 2")
-            .wait()
-            .unwrap();
+        put(&other_worker, "naofarm/@runs/r1/outcomes", "an outcome");
+        put(&other_worker, "naofarm/@runs/r1/presence", "heartbeat 2");
     });
     assert!(orx.try_recv().is_err(), "a worker heard outcomes");
 }

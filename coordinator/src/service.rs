@@ -365,37 +365,21 @@ pub async fn serve(
             return Err(ServiceError::AlreadyServed { id });
         }
     }
+    let sub = |key: String| async { session.declare_subscriber(key).await.map_err(zerr) };
+    let queryable = |key: String| async { session.declare_queryable(key).await.map_err(zerr) };
     let subs = Subscriptions {
-        outcomes: session
-            .declare_subscriber(fkeys.outcomes())
-            .await
-            .map_err(zerr)?,
-        failures: session
-            .declare_subscriber(fkeys.failures())
-            .await
-            .map_err(zerr)?,
-        presence: session
-            .declare_subscriber(fkeys.presence())
-            .await
-            .map_err(zerr)?,
+        outcomes: sub(fkeys.outcomes()).await?,
+        failures: sub(fkeys.failures()).await?,
+        presence: sub(fkeys.presence()).await?,
         live: session
             .liveliness()
             .declare_subscriber(keys::workers_all(&prefix))
             .await
             .map_err(zerr)?,
-        work_q: session
-            .declare_queryable(fkeys.work())
-            .await
-            .map_err(zerr)?,
-        ctl_q: session.declare_queryable(fkeys.ctl()).await.map_err(zerr)?,
-        status_q: session
-            .declare_queryable(rkeys.status())
-            .await
-            .map_err(zerr)?,
-        history_q: session
-            .declare_queryable(rkeys.history())
-            .await
-            .map_err(zerr)?,
+        work_q: queryable(fkeys.work()).await?,
+        ctl_q: queryable(fkeys.ctl()).await?,
+        status_q: queryable(rkeys.status()).await?,
+        history_q: queryable(rkeys.history()).await?,
     };
     let _token = session
         .liveliness()
