@@ -5,7 +5,7 @@
 //!
 //! The service keeps a [`Snapshot`] of what it shows (status, history) and
 //! the few facts it decides with (which trials are pending, who failed
-//! them); the decider sends a new snapshot with every reply. Must not: talk
+//! them); the decider sends a new snapshot whenever it changes. Must not: talk
 //! to zenoh or read a clock other than to time its own work.
 
 use std::{collections::BTreeSet, sync::mpsc, thread::JoinHandle, time::Instant};
@@ -18,7 +18,7 @@ use protocol::{
 
 use crate::{
     evolve::{Counted, OpenedIteration},
-    run::{Effect, FailureVerdict, GaveUp, Run, RunError},
+    run::{Effect, FailureVerdict, Run, RunError},
 };
 
 /// What the service shows of the run, as of the decider's last reply.
@@ -141,8 +141,9 @@ pub enum Reply {
         counted: Counted,
         /// What follows from it.
         effects: Vec<Fx>,
-        /// The state after it.
-        snapshot: Box<Snapshot>,
+        /// The state after it, when it changed (an iteration opened or was
+        /// decided; computing it draws on CLOP, so not after every outcome).
+        snapshot: Option<Box<Snapshot>>,
         /// Seconds the run took (journal, pickOut, CLOP).
         took_s: f64,
     },
@@ -153,7 +154,7 @@ pub enum Reply {
         /// Trial.
         trial: u32,
         /// The verdict.
-        verdict: Verdict,
+        verdict: FailureVerdict,
     },
     /// A control action was journaled and applied, or refused.
     Controlled {
@@ -170,17 +171,6 @@ pub enum Reply {
     },
     /// The run failed (the journal): the service stops with this.
     Fatal(RunError),
-}
-
-/// A failure's verdict, without the run's internals.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Verdict {
-    /// Journaled; run it elsewhere.
-    Retry,
-    /// Not pending any more; nothing journaled.
-    Ignored,
-    /// Failed too often: the run stops.
-    GiveUp(GaveUp),
 }
 
 /// The decider thread and its channels.
@@ -262,13 +252,17 @@ fn serve(
             Cmd::Outcome(o) => {
                 let clock = Instant::now();
                 match run.on_outcome(o.iteration, o.trial, o.seed, o.measurement(), &o.worker) {
-                    Ok((counted, fx)) => Reply::Applied {
-                        outcome: o,
-                        counted,
-                        effects: effects(&run, fx),
-                        snapshot: Box::new(Snapshot::of(&run)),
-                        took_s: clock.elapsed().as_secs_f64(),
-                    },
+                    Ok((counted, fx)) => {
+                        let took_s = clock.elapsed().as_secs_f64();
+                        let snapshot = (!fx.is_empty()).then(|| Box::new(Snapshot::of(&run)));
+                        Reply::Applied {
+                            outcome: o,
+                            counted,
+                            effects: effects(&run, fx),
+                            snapshot,
+                            took_s,
+                        }
+                    }
                     Err(e) => Reply::Fatal(e),
                 }
             }
@@ -278,14 +272,10 @@ fn serve(
                 worker,
                 reason,
             } => match run.on_failure(iteration, trial, &worker, &reason) {
-                Ok(v) => Reply::Failed {
+                Ok(verdict) => Reply::Failed {
                     iteration,
                     trial,
-                    verdict: match v {
-                        FailureVerdict::Retry => Verdict::Retry,
-                        FailureVerdict::Ignored => Verdict::Ignored,
-                        FailureVerdict::GiveUp(g) => Verdict::GiveUp(g),
-                    },
+                    verdict,
                 },
                 Err(e) => Reply::Fatal(e),
             },

@@ -250,25 +250,29 @@ impl Scheduler {
         let free = self.workers.get(id).map_or(0, |w| {
             u64::from(w.slots).saturating_sub(w.assigned.len() as u64)
         });
-        let mut room = free.min(u64::from(want));
-        let mut out = Vec::new();
-        let queued: Vec<TrialId> = self.queue.iter().copied().collect();
-        for t in queued {
-            if room == 0 {
-                break;
-            }
-            let mut failed = failed(t);
-            failed.extend(self.expired_on.get(&t).into_iter().flatten().cloned());
-            if failed.contains(id) {
+        let room = usize::try_from(free.min(u64::from(want))).unwrap_or(usize::MAX);
+        // Choose first (the queue in order, no more than the room), then take.
+        let picked: Vec<TrialId> = self
+            .queue
+            .iter()
+            .copied()
+            .filter(|&t| {
+                let mut failed = failed(t);
+                failed.extend(self.expired_on.get(&t).into_iter().flatten().cloned());
+                if !failed.contains(id) {
+                    return true;
+                }
                 let held = self.hold.get(&t).is_some_and(|until| now < *until);
                 let fresh_exists = self
                     .workers
                     .iter()
                     .any(|(w, info)| self.usable(w, info, now) && !failed.contains(w));
-                if held || fresh_exists {
-                    continue;
-                }
-            }
+                !(held || fresh_exists)
+            })
+            .take(room)
+            .collect();
+        let mut out = Vec::with_capacity(picked.len());
+        for t in picked {
             self.queue.remove(&t);
             if let Some(since) = self.ready_since.remove(&t) {
                 self.latencies.push(now.saturating_duration_since(since));
@@ -286,7 +290,6 @@ impl Scheduler {
                 },
             );
             out.push((t, dispatch));
-            room -= 1;
         }
         out
     }

@@ -31,9 +31,9 @@ use protocol::{
 use zenoh::{bytes::Encoding, sample::SampleKind, Session};
 
 use crate::{
-    decider::{self, Cmd, Decider, Facts, Fx, Reply, Snapshot, Verdict},
+    decider::{self, Cmd, Decider, Facts, Fx, Reply, Snapshot},
     evolve::{Counted, OpenedIteration},
-    run::{Effect, Run, RunError},
+    run::{Effect, FailureVerdict, Run, RunError},
     schedule::{Answer, Scheduler},
 };
 
@@ -754,7 +754,9 @@ async fn on_reply(
             snapshot,
             took_s,
         } => {
-            st.snap = *snapshot;
+            if let Some(snapshot) = snapshot {
+                st.snap = *snapshot;
+            }
             st.counters.decide_s += took_s;
             match counted {
                 Counted::New => {
@@ -772,13 +774,13 @@ async fn on_reply(
             trial,
             verdict,
         } => match verdict {
-            Verdict::Retry => {}
-            Verdict::Ignored => {
+            FailureVerdict::Retry => {}
+            FailureVerdict::Ignored => {
                 if !st.facts.pending.contains(&(iteration, trial)) {
                     st.sched.forget((iteration, trial));
                 }
             }
-            Verdict::GiveUp(g) => return Err(ServiceError::GaveUp(g)),
+            FailureVerdict::GiveUp(g) => return Err(ServiceError::GaveUp(g)),
         },
         Reply::Controlled {
             tag,
