@@ -379,6 +379,13 @@ pub struct TrialArgs {
     /// League robot type 0–4.
     #[arg(long = "type", default_value_t = 0)]
     pub robot_type: u8,
+    /// Walk engine: `open-loop` or `closed-loop`.
+    #[arg(long, default_value = "open-loop")]
+    pub walk: String,
+    /// Set one of the walk engine's constants (KEY=VALUE, repeatable): to
+    /// measure them (docs/walk.md); farm trials always use the engine's own.
+    #[arg(long, value_name = "KEY=VALUE", hide = true)]
+    pub engine: Vec<String>,
     /// Trial duration, simulated seconds.
     #[arg(long, default_value_t = 10.0)]
     pub duration: f64,

@@ -658,6 +658,7 @@ pub fn request(
         params: exp.full_params(&opened.params),
         dispatch,
         physics: exp.physics,
+        walk: exp.walk,
     })
 }
 

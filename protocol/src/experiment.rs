@@ -103,6 +103,46 @@ impl TrialModel {
     }
 }
 
+/// Which walk engine the NAO's trials use (`walk = "…"`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum WalkEngine {
+    /// The first engine: a LIP-3D plan played open loop at 0.40 s steps
+    /// (the default, so experiments and journals from before the field keep
+    /// their bits).
+    #[default]
+    OpenLoop,
+    /// A LIP-3D plan at the league's pace, balanced at 50 Hz from the robot's
+    /// own noisy sensors (`worker::nao::balance`).
+    ClosedLoop,
+}
+
+impl WalkEngine {
+    /// Every engine, by its name in experiment files.
+    pub const ALL: [(&'static str, Self); 2] = [
+        ("open-loop", Self::OpenLoop),
+        ("closed-loop", Self::ClosedLoop),
+    ];
+
+    /// Parses an engine's name.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        Self::ALL
+            .iter()
+            .find(|(n, _)| *n == s)
+            .map(|(_, w)| *w)
+            .ok_or_else(|| format!("unknown walk `{s}` (expected `open-loop` or `closed-loop`)"))
+    }
+
+    /// The engine's name in experiment files.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        Self::ALL
+            .iter()
+            .find(|(_, w)| *w == self)
+            .map_or("?", |(n, _)| n)
+    }
+}
+
 /// Where the evolving process starts (`docs/spec/evolve.md`, Algorithm 1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
@@ -271,6 +311,9 @@ pub struct Experiment {
     /// Physics of the NAO trials.
     #[serde(default)]
     pub physics: Physics,
+    /// The NAO's walk engine (default `open-loop`).
+    #[serde(default)]
+    pub walk: WalkEngine,
 }
 
 fn default_trials() -> u32 {

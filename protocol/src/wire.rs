@@ -10,7 +10,7 @@
 use serde::{de::DeserializeOwned, Deserialize, Serialize};
 
 use crate::{
-    experiment::{Physics, TrialModel},
+    experiment::{Physics, TrialModel, WalkEngine},
     measurement::Measurement,
 };
 
@@ -245,6 +245,8 @@ pub struct TrialRequest {
     pub dispatch: u64,
     /// How finely the NAO's physics integrates (the experiment's `[physics]`).
     pub physics: Physics,
+    /// The NAO's walk engine (the experiment's `walk`).
+    pub walk: WalkEngine,
 }
 
 impl WireMessage for TrialRequest {
@@ -781,10 +783,12 @@ mod tests {
         #[test]
         fn trial_request_round_trips(run in run(), i in any::<u64>(), k in any::<u32>(), seed in any::<u64>(),
                                      d in 0.1f64..100.0, ps in params(), t in 0u8..5, disp in any::<u64>(),
-                                     sub in 1u32..=50, its in 1u32..=16, pgs in 1u32..=200, arm in 0.0f64..0.1) {
+                                     sub in 1u32..=50, its in 1u32..=16, pgs in 1u32..=200, arm in 0.0f64..0.1,
+                                     closed in any::<bool>()) {
             let physics = Physics { substeps: sub, solver_iterations: its, pgs_iterations: pgs, armature_kg_m2: arm };
             let m = TrialRequest { run, iteration: i, trial: k, seed, model: TrialModel::Synthetic,
-                                   robot_type: t, duration_s: d, params: ps, dispatch: disp, physics };
+                                   robot_type: t, duration_s: d, params: ps, dispatch: disp, physics,
+                                   walk: if closed { WalkEngine::ClosedLoop } else { WalkEngine::OpenLoop } };
             prop_assert_eq!(TrialRequest::decode(&m.encode().unwrap()), Ok(m));
         }
 
@@ -963,6 +967,7 @@ mod tests {
             params: vec![("ThighRelHip2_Z".into(), 0.5)],
             dispatch: 0,
             physics: Physics::default(),
+            walk: WalkEngine::OpenLoop,
         };
         let e = TrialRequest::decode(&r.encode().unwrap())
             .unwrap_err()

@@ -308,7 +308,11 @@ fn measure_stand(settings: SimSettings, seconds: f64) -> Result<Row, Failure> {
     })
 }
 
-fn measure_walk(settings: SimSettings, seconds: f64) -> Result<Row, Failure> {
+fn measure_walk(
+    settings: SimSettings,
+    seconds: f64,
+    walk: protocol::WalkEngine,
+) -> Result<Row, Failure> {
     let t0 = Instant::now();
     let t = trial::run_observed(
         0,
@@ -316,12 +320,16 @@ fn measure_walk(settings: SimSettings, seconds: f64) -> Result<Row, Failure> {
         1,
         seconds,
         settings,
+        trial::Engine::of(walk),
         &mut |_, _| {},
     )
     .map_err(|e| Failure::Job(e.into()))?;
     Ok(Row {
         label: String::new(),
-        motion: "walk",
+        motion: match walk {
+            protocol::WalkEngine::OpenLoop => "walk",
+            protocol::WalkEngine::ClosedLoop => "walk-cl",
+        },
         settings,
         sim_s: t.measurement.sim_time_s,
         wall_s: t0.elapsed().as_secs_f64(),
@@ -402,11 +410,11 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
     ];
     let mut rows = Vec::new();
     for (label, s) in variants {
-        for motion in ["stand", "walk"] {
-            let mut r = if motion == "stand" {
-                measure_stand(s, a.seconds)?
-            } else {
-                measure_walk(s, a.seconds)?
+        for motion in ["stand", "walk", "walk-cl"] {
+            let mut r = match motion {
+                "stand" => measure_stand(s, a.seconds)?,
+                "walk" => measure_walk(s, a.seconds, protocol::WalkEngine::OpenLoop)?,
+                _ => measure_walk(s, a.seconds, protocol::WalkEngine::ClosedLoop)?,
             };
             r.label = label.to_string();
             rows.push(r);
@@ -418,11 +426,20 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
         .iter()
         .find(|r| r.motion == "walk" && r.settings == d)
         .ok_or_else(|| Failure::Job(anyhow!("no default walk row")))?;
+    let closed = rows
+        .iter()
+        .find(|r| r.motion == "walk-cl" && r.settings == d)
+        .ok_or_else(|| Failure::Job(anyhow!("no default closed-loop walk row")))?;
+    // The closed-loop walk's speed as a share of the open loop's, measured in
+    // the same run at the default settings.
+    let closed_share = rtf(closed) / rtf(headline);
     if a.json {
         let v = serde_json::json!({
             "realtime_factor": rtf(headline),
             "steps_per_second": sps(headline),
             "motion": "expert walk, type 0, default settings, one core",
+            "closed_loop_realtime_factor": rtf(closed),
+            "closed_loop_share_of_open_loop": closed_share,
             "rows": rows.iter().map(|r| serde_json::json!({
                 "settings": r.label,
                 "motion": r.motion,
@@ -438,7 +455,7 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
         outln!("{v}");
     } else {
         outln!(
-            "{:<44} {:>6} {:>10} {:>12} {:>6}",
+            "{:<44} {:>7} {:>10} {:>12} {:>6}",
             "settings",
             "motion",
             "realtime×",
@@ -447,7 +464,7 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
         );
         for r in &rows {
             outln!(
-                "{:<44} {:>6} {:>10.1} {:>12.0} {:>6}",
+                "{:<44} {:>7} {:>10.1} {:>12.0} {:>6}",
                 r.label,
                 r.motion,
                 rtf(r),
@@ -455,6 +472,11 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
                 r.fell
             );
         }
+        outln!(
+            "closed-loop walk at the default settings: {:.1}x real time, {:.0} % of the open loop's",
+            rtf(closed),
+            100.0 * closed_share
+        );
     }
     Ok(())
 }

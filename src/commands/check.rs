@@ -17,11 +17,12 @@ pub fn check(path: &Path, json: bool) -> Result<(), Failure> {
         return Ok(());
     }
     outln!(
-        "experiment `{}` (seed {}, model {:?}, robot type {}, start {:?})",
+        "experiment `{}` (seed {}, model {:?}, robot type {}, walk {}, start {:?})",
         e.name,
         e.seed,
         e.model,
         e.robot_type,
+        e.walk.name(),
         e.start
     );
     outln!(

@@ -4,11 +4,12 @@
 use std::time::Instant;
 
 use anyhow::anyhow;
-use protocol::{measurement::Measurement, params::ParamValues, pickout::stats};
+use protocol::{measurement::Measurement, params::ParamValues, pickout::stats, WalkEngine};
 use worker::nao::{
     model::NaoModel,
+    replay::Replayed,
     sim::{SimSettings, CYCLE_S},
-    trial::{self, NaoTrial},
+    trial::{self, Batch, NaoTrial},
 };
 
 use crate::{
@@ -54,25 +55,40 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         Failure::Usage(anyhow!("--{flag}: {m}"))
     })?;
     let settings = SimSettings::with_physics(&physics);
+    let walk = WalkEngine::parse(&a.walk).map_err(|m| Failure::Usage(anyhow!("--walk: {m}")))?;
+    let mut engine = trial::Engine::of(walk);
+    for kv in &a.engine {
+        let (k, v) = kv
+            .split_once('=')
+            .ok_or_else(|| Failure::Usage(anyhow!("--engine `{kv}`: expected KEY=VALUE")))?;
+        engine = engine
+            .with(k, v)
+            .map_err(|m| Failure::Usage(anyhow!("--engine {m}")))?;
+    }
     if let Some(path) = &a.record {
-        let what = Recording {
+        let what = Replayed {
             robot_type: a.robot_type,
             seed: a.seed,
-            duration: a.duration,
+            duration_s: a.duration,
             params: &params,
             values: &values,
+            settings,
+            engine,
         };
-        record(path, &what, settings)?;
+        record(path, &what)?;
     }
     let t0 = Instant::now();
     let runs = trial::run_many(
         a.robot_type,
         &values,
-        a.seed,
-        a.trials,
+        Batch {
+            seed0: a.seed,
+            n: a.trials,
+            threads,
+        },
         a.duration,
-        threads,
         settings,
+        engine,
     )
     .map_err(|e| Failure::Job(e.into()))?;
     let wall = t0.elapsed().as_secs_f64();
@@ -158,14 +174,16 @@ fn replay(a: &TrialArgs, dir: &std::path::Path, iteration: u64, k: u32) -> Resul
                 req.model
             )));
         }
-        let what = Recording {
+        let what = Replayed {
             robot_type: req.robot_type,
             seed: req.seed,
-            duration: req.duration_s,
+            duration_s: req.duration_s,
             params: &req.params,
             values: &values,
+            settings: SimSettings::with_physics(&req.physics),
+            engine: trial::Engine::of(req.walk),
         };
-        record(path, &what, SimSettings::with_physics(&req.physics))?;
+        record(path, &what)?;
     }
     let m = worker::run_trial(req).map_err(|e| Failure::Job(e.into()))?;
     let same = ft.journaled.as_ref().map(|(j, _)| same_bits(j, &m));
@@ -245,37 +263,15 @@ fn params_json(params: &[(String, f64)]) -> serde_json::Map<String, serde_json::
         .collect()
 }
 
-/// One trial to record: which robot, seed, duration and parameters.
-#[derive(Clone, Copy)]
-struct Recording<'a> {
-    robot_type: u8,
-    seed: u64,
-    duration: f64,
-    params: &'a [(String, f64)],
-    values: &'a ParamValues,
-}
-
 /// Writes the replay of one trial: a header line (robot type, seed,
 /// parameters, body names and shapes), then one line per cycle with the time
 /// and every body's centre pose (x, y, z, qx, qy, qz, qw; world frame, m).
-fn record(
-    path: &std::path::Path,
-    what: &Recording<'_>,
-    settings: SimSettings,
-) -> Result<(), Failure> {
+fn record(path: &std::path::Path, what: &Replayed<'_>) -> Result<(), Failure> {
     let file = std::fs::File::create(path)
         .map_err(|e| Failure::Usage(anyhow!("--record {}: {e}", path.display())))?;
     let mut out = std::io::BufWriter::new(file);
-    let t = worker::nao::replay::write(
-        &mut out,
-        what.robot_type,
-        what.seed,
-        what.duration,
-        what.params,
-        what.values,
-        settings,
-    )
-    .map_err(|e| Failure::Job(anyhow!("--record {}: {e}", path.display())))?;
+    let t = worker::nao::replay::write(&mut out, what)
+        .map_err(|e| Failure::Job(anyhow!("--record {}: {e}", path.display())))?;
     eprintln!(
         "recorded seed {} ({} cycles{}) to {}",
         what.seed,

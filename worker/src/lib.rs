@@ -43,6 +43,7 @@ pub fn run_trial(req: &TrialRequest) -> Result<Measurement, TrialError> {
                 req.seed,
                 req.duration_s,
                 nao::sim::SimSettings::with_physics(&req.physics),
+                nao::trial::Engine::of(req.walk),
             )
             .map_err(|e| TrialError::Model(e.to_string()))?;
             Ok(t.measurement)
@@ -67,6 +68,7 @@ mod tests {
             params: vec![],
             dispatch: 0,
             physics,
+            walk: protocol::WalkEngine::OpenLoop,
         }
     }
 

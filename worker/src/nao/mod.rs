@@ -1,8 +1,9 @@
 //! The league's NAO rebuilt in rapier3d: the robot as data ([`model`]), its
 //! forward kinematics ([`kinematics`]), its simulation ([`sim`]), the walk
-//! engine ([`walk`]), one walking trial ([`trial`]) and its replay file
+//! engine ([`walk`]) and its balance at the league's pace ([`balance`]), one walking trial ([`trial`]) and its replay file
 //! ([`replay`]).
 
+pub mod balance;
 pub mod kinematics;
 pub mod model;
 pub mod replay;

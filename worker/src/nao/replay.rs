@@ -25,16 +25,36 @@ pub enum ReplayError {
     Io(#[from] std::io::Error),
 }
 
+/// The trial a replay shows.
+#[derive(Debug, Clone, Copy)]
+pub struct Replayed<'a> {
+    /// League robot type.
+    pub robot_type: u8,
+    /// The trial's seed.
+    pub seed: u64,
+    /// Simulated seconds.
+    pub duration_s: f64,
+    /// The parameters as named in the header.
+    pub params: &'a [(String, f64)],
+    /// The same parameters, resolved.
+    pub values: &'a ParamValues,
+    /// Physics settings.
+    pub settings: SimSettings,
+    /// The walk engine.
+    pub engine: trial::Engine,
+}
+
 /// Runs one trial and writes its replay to `out`; returns the trial.
-pub fn write(
-    out: &mut dyn Write,
-    robot_type: u8,
-    seed: u64,
-    duration_s: f64,
-    params: &[(String, f64)],
-    values: &ParamValues,
-    settings: SimSettings,
-) -> Result<NaoTrial, ReplayError> {
+pub fn write(out: &mut dyn Write, what: &Replayed<'_>) -> Result<NaoTrial, ReplayError> {
+    let Replayed {
+        robot_type,
+        seed,
+        duration_s,
+        params,
+        values,
+        settings,
+        engine,
+    } = *what;
     let model = NaoModel::with_params(robot_type, values).map_err(NaoTrialError::from)?;
     let named: serde_json::Map<String, serde_json::Value> = params
         .iter()
@@ -48,6 +68,7 @@ pub fn write(
     let header = serde_json::json!({
         "robot_type": robot_type,
         "seed": seed,
+        "walk": engine.name(),
         "params": named,
         "cycle_s": CYCLE_S,
         "bodies": bodies,
@@ -60,6 +81,7 @@ pub fn write(
         seed,
         duration_s,
         settings,
+        engine,
         &mut |sim, p| {
             if io.is_ok() {
                 let line = serde_json::json!({"t": p.time_s, "poses": sim.body_poses()});

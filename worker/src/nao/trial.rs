@@ -15,11 +15,89 @@ use protocol::measurement::Measurement;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use super::balance::{Balance, Gains};
 use super::model::{ModelError, NaoModel};
 use super::sim::{fallen, standing_angles, Perception, Sim, SimError, SimSettings, Start, CYCLE_S};
-use super::walk::{Gait, WalkParams};
+use super::walk::{Gait, GaitConfig, WalkParams};
 use crate::noise::gauss;
 use protocol::params::ParamValues;
+pub use protocol::WalkEngine;
+
+/// A walk engine's plan constants and, closed loop, its feedback gains.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Engine {
+    /// The plan's constants.
+    pub gait: GaitConfig,
+    /// Feedback gains; none plays the plan open loop.
+    pub feedback: Option<Gains>,
+}
+
+impl Engine {
+    /// The engine an experiment names.
+    #[must_use]
+    pub fn of(walk: WalkEngine) -> Self {
+        match walk {
+            WalkEngine::OpenLoop => Self {
+                gait: GaitConfig::OPEN_LOOP,
+                feedback: None,
+            },
+            WalkEngine::ClosedLoop => Self {
+                gait: super::balance::GAIT,
+                feedback: Some(super::balance::GAINS),
+            },
+        }
+    }
+
+    /// The name of the walk this engine is, or `custom` (constants set by hand).
+    #[must_use]
+    pub fn name(&self) -> &'static str {
+        WalkEngine::ALL
+            .iter()
+            .find(|(_, w)| Self::of(*w) == *self)
+            .map_or("custom", |(n, _)| n)
+    }
+
+    /// This engine with one constant set by name (`naofarm trial --engine`,
+    /// which measures the engine's constants): a [`GaitConfig`] field, a
+    /// [`Gains`] field (which switches feedback on), `travel` = `cosine` or
+    /// `trapezoid`, or `feedback` = `off`.
+    pub fn with(mut self, key: &str, value: &str) -> Result<Self, String> {
+        let num = || -> Result<f64, String> {
+            value
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| format!("`{key}`: `{value}` is not a finite number"))
+        };
+        let g = &mut self.gait;
+        match key {
+            "period_s" => g.period_s = num()?.clamp(0.05, 2.0),
+            "double_support" => g.double_support = num()?.clamp(0.0, 0.9),
+            "com_above_hip_m" => g.com_above_hip_m = num()?.clamp(-0.1, 0.2),
+            "hip_roll_comp_rad" => g.hip_roll_comp_rad = num()?.clamp(-0.5, 0.5),
+            "start_s" => g.start_s = num()?.clamp(0.0, 5.0),
+            "travel" => {
+                g.travel = match value {
+                    "cosine" => super::walk::TravelProfile::Cosine,
+                    "trapezoid" => super::walk::TravelProfile::Trapezoid,
+                    _ => {
+                        return Err(format!(
+                            "`travel`: `{value}` is not `cosine` or `trapezoid`"
+                        ))
+                    }
+                }
+            }
+            "feedback" if value == "off" => self.feedback = None,
+            _ => {
+                let v = num()?;
+                let f = self.feedback.get_or_insert(super::balance::GAINS);
+                *f.field(key)
+                    .ok_or_else(|| format!("unknown engine constant `{key}`"))? = v;
+            }
+        }
+        Ok(self)
+    }
+}
 
 /// Initial joint jitter, ± degrees.
 pub const INIT_JITTER_DEG: f64 = 2.0;
@@ -29,6 +107,12 @@ pub const SENSOR_NOISE_DEG: f64 = 1.0;
 pub const ACTUATOR_NOISE_RAD_S: f64 = 0.1;
 /// Ground friction spread.
 pub const FRICTION_RANGE: (f64, f64) = (0.7, 1.1);
+/// Gyro noise σ, rad/s (closed-loop walk only: the open loop reads no gyro).
+pub const GYRO_NOISE_RAD_S: f64 = 0.05;
+/// Accelerometer noise σ, m/s² (closed-loop walk only).
+pub const ACCEL_NOISE_M_S2: f64 = 0.2;
+/// Foot force sensor noise σ, N (closed-loop walk only).
+pub const FORCE_NOISE_N: f64 = 1.0;
 
 /// What one trial did: its measurement, and how it was made.
 #[derive(Debug, Clone, PartialEq)]
@@ -63,6 +147,7 @@ pub fn run(
     seed: u64,
     duration_s: f64,
     settings: SimSettings,
+    engine: Engine,
 ) -> Result<NaoTrial, NaoTrialError> {
     run_observed(
         robot_type,
@@ -70,6 +155,7 @@ pub fn run(
         seed,
         duration_s,
         settings,
+        engine,
         &mut |_, _| {},
     )
 }
@@ -82,11 +168,13 @@ pub fn run_observed(
     seed: u64,
     duration_s: f64,
     mut settings: SimSettings,
+    engine: Engine,
     observe: &mut dyn FnMut(&Sim, &Perception),
 ) -> Result<NaoTrial, NaoTrialError> {
     let model = NaoModel::with_params(robot_type, params)?;
     let walk: WalkParams = params.walk();
-    let gait = Gait::new(&model, walk, duration_s);
+    let gait = Gait::with_config(&model, walk, duration_s, engine.gait);
+    let mut balance = engine.feedback.map(Balance::new);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let rest = standing_angles(&model);
     let q0 = gait.targets(&rest, 0.0);
@@ -106,15 +194,24 @@ pub fn run_observed(
     for k in 0..cycles {
         let t = k as f64 * CYCLE_S;
         let q_next = gait.targets(&rest, t + CYCLE_S);
+        let aim = match balance.as_mut() {
+            None => None,
+            Some(b) => {
+                let sensed = noisy(&perception, &mut rng);
+                Some(gait.corrected(&q_next, &b.update(&sensed, CYCLE_S)))
+            }
+        };
         let cmd: Vec<f64> = perception
             .joint_angles_rad
             .iter()
             .zip(&q_now)
             .zip(&q_next)
-            .map(|((m, a), b)| {
+            .enumerate()
+            .map(|(j, ((m, a), b))| {
                 let measured = m + sensor * gauss(&mut rng);
+                let target = aim.as_ref().map_or(*b, |q| q[j]);
                 (b - a) / CYCLE_S
-                    + super::sim::SERVO_GAIN * (b - measured)
+                    + super::sim::SERVO_GAIN * (target - measured)
                     + ACTUATOR_NOISE_RAD_S * gauss(&mut rng)
             })
             .collect();
@@ -157,17 +254,44 @@ pub fn run_observed(
     })
 }
 
-/// Runs `n` trials of one parameter set on up to `threads` threads, seeds
-/// `seed0, seed0 + 1, …` with physics `settings`; results in seed order whatever the threads.
+/// The sensors of `p` as the closed-loop walk reads them: gyro, accelerometer
+/// and foot forces each with their noise.
+fn noisy(p: &Perception, rng: &mut ChaCha8Rng) -> Perception {
+    let mut s = p.clone();
+    for g in &mut s.gyro_rad_s {
+        *g += GYRO_NOISE_RAD_S * gauss(rng);
+    }
+    for a in &mut s.accel_m_s2 {
+        *a += ACCEL_NOISE_M_S2 * gauss(rng);
+    }
+    for f in s.foot_force_n.iter_mut().flatten() {
+        *f += FORCE_NOISE_N * gauss(rng);
+    }
+    s
+}
+
+/// How many trials [`run_many`] runs, from which seed, on how many threads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Batch {
+    /// The first trial's seed (then +1 per trial, wrapping).
+    pub seed0: u64,
+    /// Number of trials.
+    pub n: u64,
+    /// Threads (clamped to 1..=64).
+    pub threads: usize,
+}
+
+/// Runs a [`Batch`] of trials of one parameter set with physics `settings`;
+/// results in seed order whatever the threads.
 pub fn run_many(
     robot_type: u8,
     params: &ParamValues,
-    seed0: u64,
-    n: u64,
+    batch: Batch,
     duration_s: f64,
-    threads: usize,
     settings: SimSettings,
+    engine: Engine,
 ) -> Result<Vec<NaoTrial>, NaoTrialError> {
+    let Batch { seed0, n, threads } = batch;
     let threads = threads.clamp(1, 64);
     let next = std::sync::atomic::AtomicU64::new(0);
     let mut out: Vec<Result<NaoTrial, NaoTrialError>> = std::thread::scope(|s| {
@@ -181,7 +305,7 @@ pub fn run_many(
                             break mine;
                         }
                         let seed = seed0.wrapping_add(i);
-                        mine.push(run(robot_type, params, seed, duration_s, settings));
+                        mine.push(run(robot_type, params, seed, duration_s, settings, engine));
                     }
                 })
             })
@@ -217,6 +341,12 @@ pub fn run_many(
 }
 
 #[cfg(test)]
+const OPEN: Engine = Engine {
+    gait: GaitConfig::OPEN_LOOP,
+    feedback: None,
+};
+
+#[cfg(test)]
 mod tests {
     use super::*;
 
@@ -227,11 +357,14 @@ mod tests {
         let ts = run_many(
             0,
             &ParamValues::default(),
-            1000,
-            100,
+            Batch {
+                seed0: 1000,
+                n: 100,
+                threads: 2,
+            },
             10.0,
-            2,
             SimSettings::default(),
+            OPEN,
         )
         .unwrap();
         let ok: Vec<&NaoTrial> = ts.iter().filter(|t| !t.measurement.fell).collect();
@@ -253,21 +386,64 @@ mod tests {
         let again = run_many(
             0,
             &ParamValues::default(),
-            1000,
-            4,
+            Batch {
+                seed0: 1000,
+                n: 4,
+                threads: 1,
+            },
             10.0,
-            1,
             SimSettings::default(),
+            OPEN,
         )
         .unwrap();
         assert_eq!(&ts[..4], &again[..]);
     }
 
+    /// The open-loop walk keeps the bits it had before the closed-loop engine
+    /// came (read off `naofarm trial --json --seed 11 --param
+    /// ThighRelHip2_Z=-0.07` built at d703d2c, on this workplace's x86-64).
+    #[test]
+    fn the_open_loop_walk_keeps_its_bits() {
+        let p = ParamValues::from_named(&[("ThighRelHip2_Z".to_string(), -0.07)]).unwrap();
+        for (seed, x, y) in [
+            (11, 1.780_340_194_702_148_4, -0.012_143_537_402_153_015),
+            (12, 1.751_945_972_442_627, -0.062_537_983_059_883_12),
+        ] {
+            let t = run(0, &p, seed, 10.0, SimSettings::default(), OPEN).unwrap();
+            assert_eq!(t.measurement.x_m.to_bits(), f64::to_bits(x), "seed {seed}");
+            assert_eq!(t.measurement.y_m.to_bits(), f64::to_bits(y), "seed {seed}");
+        }
+    }
+
     #[test]
     fn same_seed_same_bits_other_seed_other_numbers() {
-        let a = run(0, &ParamValues::default(), 11, 3.0, SimSettings::default()).unwrap();
-        let b = run(0, &ParamValues::default(), 11, 3.0, SimSettings::default()).unwrap();
-        let c = run(0, &ParamValues::default(), 12, 3.0, SimSettings::default()).unwrap();
+        let a = run(
+            0,
+            &ParamValues::default(),
+            11,
+            3.0,
+            SimSettings::default(),
+            OPEN,
+        )
+        .unwrap();
+        let b = run(
+            0,
+            &ParamValues::default(),
+            11,
+            3.0,
+            SimSettings::default(),
+            OPEN,
+        )
+        .unwrap();
+        let c = run(
+            0,
+            &ParamValues::default(),
+            12,
+            3.0,
+            SimSettings::default(),
+            OPEN,
+        )
+        .unwrap();
         assert_eq!(a.measurement.x_m.to_bits(), b.measurement.x_m.to_bits());
         assert_eq!(a.measurement.y_m.to_bits(), b.measurement.y_m.to_bits());
         assert_ne!(a.measurement.x_m.to_bits(), c.measurement.x_m.to_bits());
@@ -284,6 +460,7 @@ mod tests {
             3,
             10.0,
             SimSettings::default(),
+            OPEN,
             &mut |_, p| {
                 cycles += 1;
                 for (j, a) in model.joints.iter().zip(&p.joint_angles_rad) {
@@ -318,7 +495,19 @@ mod tests {
         for c in corners {
             let p: Vec<(String, f64)> = c.iter().map(|(n, v)| ((*n).to_string(), *v)).collect();
             let p = ParamValues::from_named(&p).unwrap();
-            let ts = run_many(0, &p, 0, 4, 10.0, 2, SimSettings::default()).unwrap();
+            let ts = run_many(
+                0,
+                &p,
+                Batch {
+                    seed0: 0,
+                    n: 4,
+                    threads: 2,
+                },
+                10.0,
+                SimSettings::default(),
+                OPEN,
+            )
+            .unwrap();
             falls += ts.iter().filter(|t| t.measurement.fell).count();
         }
         assert!(falls > 0);
@@ -368,7 +557,7 @@ mod probe {
             if let Ok(v) = std::env::var("PROBE_ARMATURE") {
                 settings.armature_kg_m2 = v.parse().unwrap();
             }
-            let tr = run_observed(0, p, 1, 10.0, settings, &mut |sim, _| {
+            let tr = run_observed(0, p, 1, 10.0, settings, OPEN, &mut |sim, _| {
                 c += 1;
                 for (k, (j, a)) in m.joints.iter().zip(&sim.joint_angles()).enumerate() {
                     let e = (j.limits_rad.0 - a).max(a - j.limits_rad.1).max(0.0);

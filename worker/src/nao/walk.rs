@@ -58,6 +58,73 @@ pub const PITCH_ABOVE_ROLL: f64 = 0.005;
 const G: f64 = 9.81;
 const GRID_S: f64 = 0.005;
 
+/// The constants of one LIP-3D gait: the open-loop walk's are
+/// [`GaitConfig::OPEN_LOOP`], the balanced walk's (`nao::balance`) its own.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GaitConfig {
+    /// Step period, s.
+    pub period_s: f64,
+    /// Double-support share of a step.
+    pub double_support: f64,
+    /// CoM above the hip centre, m.
+    pub com_above_hip_m: f64,
+    /// Stance hip-roll compensation, rad.
+    pub hip_roll_comp_rad: f64,
+    /// Stepping starts at, s.
+    pub start_s: f64,
+    /// Swing travel profile (forward, over single support).
+    pub travel: TravelProfile,
+}
+
+/// How the swing foot travels forward over single support (s in 0..1, as a
+/// share of the way).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TravelProfile {
+    /// (1 − cos πs)/2: peak speed π/2 × the mean (the open-loop walk's).
+    Cosine,
+    /// Constant acceleration over the first and last [`TRAVEL_RAMP`] of the
+    /// swing, constant speed between: peak 1/(1 − ramp) × the mean (1.33×
+    /// at 0.25), the least peak joint speed for the way.
+    Trapezoid,
+}
+
+/// Share of the swing over which a [`TravelProfile::Trapezoid`] speeds up (and slows down).
+pub const TRAVEL_RAMP: f64 = 0.25;
+
+impl TravelProfile {
+    /// The share of the way travelled at swing phase s (0..1).
+    #[must_use]
+    pub fn at(self, s: f64) -> f64 {
+        match self {
+            Self::Cosine => (1.0 - (std::f64::consts::PI * s).cos()) / 2.0,
+            Self::Trapezoid => {
+                let r = TRAVEL_RAMP;
+                let v = 1.0 / (1.0 - r);
+                let s = s.clamp(0.0, 1.0);
+                if s < r {
+                    v * s * s / (2.0 * r)
+                } else if s > 1.0 - r {
+                    1.0 - v * (1.0 - s) * (1.0 - s) / (2.0 * r)
+                } else {
+                    v * (s - r / 2.0)
+                }
+            }
+        }
+    }
+}
+
+impl GaitConfig {
+    /// The open-loop walk's constants (the module's documentation says why).
+    pub const OPEN_LOOP: Self = Self {
+        period_s: STEP_PERIOD_S,
+        double_support: DOUBLE_SUPPORT,
+        com_above_hip_m: COM_ABOVE_HIP_M,
+        hip_roll_comp_rad: HIP_ROLL_COMP_RAD,
+        start_s: START_S,
+        travel: TravelProfile::Cosine,
+    };
+}
+
 pub use protocol::params::WalkParams;
 
 /// Leg geometry for the IK, from the morphology.
@@ -139,6 +206,7 @@ pub struct GaitState {
 #[derive(Debug, Clone)]
 pub struct Gait {
     p: WalkParams,
+    cfg: GaitConfig,
     leg: Leg,
     /// Hip centre above the ankle-roll anchor, m.
     hip_height: f64,
@@ -171,15 +239,21 @@ fn leg_slots(model: &NaoModel) -> Vec<Option<(usize, usize)>> {
 }
 
 impl Gait {
-    /// Plans `duration_s` seconds of walking.
+    /// Plans `duration_s` seconds of the open-loop walk.
     #[must_use]
     pub fn new(model: &NaoModel, p: WalkParams, duration_s: f64) -> Self {
+        Self::with_config(model, p, duration_s, GaitConfig::OPEN_LOOP)
+    }
+
+    /// Plans `duration_s` seconds of walking with the constants `cfg`.
+    #[must_use]
+    pub fn with_config(model: &NaoModel, p: WalkParams, duration_s: f64, cfg: GaitConfig) -> Self {
         let leg = Leg::of(model);
         let hip_height = p.ratio_flexion * (leg.thigh + leg.tibia) + PITCH_ABOVE_ROLL;
-        let zc = hip_height + ANKLE_H + COM_ABOVE_HIP_M;
+        let zc = hip_height + ANKLE_H + cfg.com_above_hip_m;
         let tc = (zc / G).sqrt();
         let foot_y = leg.hip[1];
-        let nsteps = ((duration_s + 10.0 * tc) / STEP_PERIOD_S) as usize + 4;
+        let nsteps = ((duration_s + 10.0 * tc) / cfg.period_s) as usize + 4;
         let mut steps = vec![0.0; nsteps + 1];
         for k in 0..nsteps {
             let len = if k < 2 {
@@ -191,6 +265,7 @@ impl Gait {
         }
         let mut g = Self {
             p,
+            cfg,
             leg,
             hip_height,
             foot_y,
@@ -207,10 +282,10 @@ impl Gait {
     /// The ZMP plan at time t: support-foot centre, handed over linearly during
     /// double support.
     fn zmp(&self, t: f64) -> [f64; 2] {
-        if t < START_S {
+        if t < self.cfg.start_s {
             return [0.0, 0.0];
         }
-        let x = (t - START_S) / STEP_PERIOD_S;
+        let x = (t - self.cfg.start_s) / self.cfg.period_s;
         let k = x.floor() as usize;
         let u = x - k as f64;
         let sgn = if k.is_multiple_of(2) { 1.0 } else { -1.0 };
@@ -221,7 +296,7 @@ impl Gait {
         } else {
             [step(k - 1), -sgn * self.foot_y]
         };
-        let a = (u / DOUBLE_SUPPORT).min(1.0);
+        let a = (u / self.cfg.double_support).min(1.0);
         [
             prev[0] + (cur[0] - prev[0]) * a,
             prev[1] + (cur[1] - prev[1]) * a,
@@ -268,19 +343,16 @@ impl Gait {
         let w = self.foot_y;
         let mut feet = [[0.0, w, ANKLE_H], [0.0, -w, ANKLE_H]];
         let mut support = None;
-        if t >= START_S {
-            let x = (t - START_S) / STEP_PERIOD_S;
+        if t >= self.cfg.start_s {
+            let x = (t - self.cfg.start_s) / self.cfg.period_s;
             let k = x.floor() as usize;
             let u = x - k as f64;
             let sup = k % 2; // 0 left, 1 right
             let sw = 1 - sup;
             let step = |i: usize| self.steps[i.min(self.steps.len() - 1)];
-            let s = if u <= DOUBLE_SUPPORT {
-                0.0
-            } else {
-                (u - DOUBLE_SUPPORT) / (1.0 - DOUBLE_SUPPORT)
-            };
-            let sx = (1.0 - (std::f64::consts::PI * s).cos()) / 2.0;
+            let ds = self.cfg.double_support;
+            let s = if u <= ds { 0.0 } else { (u - ds) / (1.0 - ds) };
+            let sx = self.cfg.travel.at(s);
             let x0 = if k >= 1 { step(k - 1) } else { 0.0 };
             let x1 = step(k + 1);
             let lift = self.p.height_lift * (1.0 - (std::f64::consts::TAU * s).cos()) / 2.0;
@@ -320,7 +392,7 @@ impl Gait {
         }
         if let Some((sup, wgt)) = st.support {
             let sgn = if sup == 0 { 1.0 } else { -1.0 };
-            out[sup][1] += sgn * HIP_ROLL_COMP_RAD * wgt;
+            out[sup][1] += sgn * self.cfg.hip_roll_comp_rad * wgt;
         }
         out
     }
@@ -342,6 +414,22 @@ impl Gait {
             *qj = qj.clamp(*lo, *hi);
         }
         q
+    }
+}
+
+impl Gait {
+    /// Targets `q` (from [`Gait::targets`]) with a balance correction added
+    /// to the legs, clamped to the stops again.
+    #[must_use]
+    pub fn corrected(&self, q: &[f64], c: &super::balance::Correction) -> Vec<f64> {
+        q.iter()
+            .zip(&self.leg_slots)
+            .zip(&self.limits)
+            .map(|((qj, slot), (lo, hi))| match slot {
+                Some((side, i)) => (qj + c.legs[*side][*i]).clamp(*lo, *hi),
+                None => *qj,
+            })
+            .collect()
     }
 }
 

@@ -1,0 +1,356 @@
+//! The closed-loop walk: the LIP-3D plan of [`super::walk`] at the league's
+//! pace, balanced every 20 ms agent cycle from the robot's own noisy sensors.
+//!
+//! It must stay a controller: joint targets from the plan and what the robot
+//! senses, no access to the simulation's true state and no randomness (the
+//! trial adds the sensors' noise before they reach it).
+//!
+//! # What it senses and what it does with it
+//! - **Torso tilt**, estimated by a complementary filter: the gyro integrated,
+//!   pulled towards the accelerometer's gravity direction with time constant
+//!   [`TILT_FILTER_S`]. The plan keeps the torso upright, so the estimate is the
+//!   error.
+//! - **Sagittal balance**: the stance hip pitch turns against the torso's
+//!   pitch ([`Gains::hip_pitch`]). Without it the torso leans back a little
+//!   more with every fast step (−2° on average at 0.22 s steps, −40° and a fall
+//!   within 8 s on some seeds), and a leaning torso swings the feet further
+//!   than the plan: distances that are not walking.
+//! - The stance ankle pitch and hip roll can turn against the tilt and its
+//!   rate too ([`Gains`]); measured, they did not help this robot and are 0.
+//! - **Foot force sensors** weigh the stance corrections: each leg's share is
+//!   its share of the sensed vertical load, so a foot in the air gets none.
+//!
+//! # Engine constants (values and why)
+//! Each value was measured on the expert set (20 noisy trials, seed 3) against
+//! its neighbours with `naofarm trial --walk closed-loop --engine KEY=VALUE`;
+//! `docs/walk.md` has the tables.
+//! - Step period 0.18 s (the open loop's 0.40 s): speed comes from the step
+//!   rate. At 0.17 s s fell to 0.8–0.9, at 0.16 s every trial fell.
+//! - Double support 5 % (10 % → 3.83 m, 5 % → 4.07 m, 15 % → s 0.8).
+//! - Stance hip-roll compensation 0.10 rad (the open loop's 0.20 rad rolls the
+//!   torso over at this pace: s 0.35 at 0.15, 1.00 at 0.10, 0.50 at 0.05).
+//! - Trapezoidal swing travel: peak foot speed 1.33× the mean instead of the
+//!   cosine's 1.57×, so the hip and knee stay nearer the 6.14 rad/s cap
+//!   (0.22 s steps of 0.10 m: 4.73 m against 4.48 m).
+//! - Hip-pitch gain −1.5 rad/rad: −1 → 4.07 m, −1.5 → 4.15 m, −2 → 4.16 m
+//!   with s 0.98 over 100 trials; 0 → 3.81 m.
+
+use super::sim::Perception;
+use super::walk::{GaitConfig, TravelProfile};
+
+/// The closed-loop walk's plan constants.
+pub const GAIT: GaitConfig = GaitConfig {
+    period_s: 0.18,
+    double_support: 0.05,
+    com_above_hip_m: 0.03,
+    hip_roll_comp_rad: 0.10,
+    start_s: 0.5,
+    travel: TravelProfile::Trapezoid,
+};
+
+/// Time constant of the tilt estimate's pull towards the accelerometer, s.
+pub const TILT_FILTER_S: f64 = 0.5;
+
+/// Feedback gains (rad per rad, rad per rad/s).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Gains {
+    /// Stance ankle pitch per rad of torso pitch.
+    pub ankle_pitch: f64,
+    /// Stance ankle pitch per rad/s of pitch rate.
+    pub ankle_pitch_rate: f64,
+    /// Stance hip pitch per rad of torso pitch.
+    pub hip_pitch: f64,
+    /// Stance hip roll per rad of torso roll.
+    pub hip_roll: f64,
+    /// Stance hip roll per rad/s of roll rate.
+    pub hip_roll_rate: f64,
+}
+
+impl Gains {
+    /// A gain by its field name.
+    pub fn field(&mut self, name: &str) -> Option<&mut f64> {
+        Some(match name {
+            "ankle_pitch" => &mut self.ankle_pitch,
+            "ankle_pitch_rate" => &mut self.ankle_pitch_rate,
+            "hip_pitch" => &mut self.hip_pitch,
+            "hip_roll" => &mut self.hip_roll,
+            "hip_roll_rate" => &mut self.hip_roll_rate,
+            _ => return None,
+        })
+    }
+}
+
+/// The closed-loop walk's gains.
+pub const GAINS: Gains = Gains {
+    ankle_pitch: 0.0,
+    ankle_pitch_rate: 0.0,
+    hip_pitch: -1.5,
+    hip_roll: 0.0,
+    hip_roll_rate: 0.0,
+};
+
+/// The controller's state: the tilt estimate.
+#[derive(Debug, Clone)]
+pub struct Balance {
+    gains: Gains,
+    /// Torso (roll, pitch) estimate, rad.
+    tilt: [f64; 2],
+}
+
+/// What the controller adds to the plan for the next cycle.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Correction {
+    /// Added to each leg's six angles (le1..le6), left then right.
+    pub legs: [[f64; 6]; 2],
+}
+
+impl Balance {
+    /// A controller with these gains, the torso upright.
+    #[must_use]
+    pub fn new(gains: Gains) -> Self {
+        Self {
+            gains,
+            tilt: [0.0, 0.0],
+        }
+    }
+
+    /// The torso (roll, pitch) estimate, rad.
+    #[must_use]
+    pub fn tilt(&self) -> [f64; 2] {
+        self.tilt
+    }
+
+    /// Folds in one cycle's (noisy) perception and returns the correction.
+    pub fn update(&mut self, sensed: &Perception, dt: f64) -> Correction {
+        let [gx, gy, _] = sensed.gyro_rad_s;
+        let [ax, ay, az] = sensed.accel_m_s2;
+        // Gravity seen from a torso rolled by r and pitched by p reads
+        // (−g sin p, g sin r cos p, g cos r cos p) in the torso's axes.
+        let acc_roll = ay.atan2(az);
+        let acc_pitch = (-ax).atan2(ay.hypot(az));
+        let k = dt / (TILT_FILTER_S + dt);
+        let roll = self.tilt[0] + gx * dt;
+        let pitch = self.tilt[1] + gy * dt;
+        self.tilt = [
+            roll + k * (acc_roll - roll),
+            pitch + k * (acc_pitch - pitch),
+        ];
+        let [roll, pitch] = self.tilt;
+        let load = |f: &[f64; 3]| f[2].max(0.0);
+        let (l, r) = (load(&sensed.foot_force_n[0]), load(&sensed.foot_force_n[1]));
+        let share = if l + r > 1.0 {
+            [l / (l + r), r / (l + r)]
+        } else {
+            [0.0, 0.0]
+        };
+        let g = &self.gains;
+        let mut c = Correction::default();
+        for (side, w) in share.iter().enumerate() {
+            let leg = &mut c.legs[side];
+            leg[4] = w * (g.ankle_pitch * pitch + g.ankle_pitch_rate * gy);
+            leg[2] = w * g.hip_pitch * pitch;
+            leg[1] = w * (g.hip_roll * roll + g.hip_roll_rate * gx);
+        }
+        c
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nao::model::NaoModel;
+    use crate::nao::sim::SimSettings;
+    use crate::nao::trial::{run, run_many, run_observed, Batch, Engine, NaoTrial, WalkEngine};
+    use crate::nao::walk::Gait;
+    use protocol::params::ParamValues;
+
+    fn closed() -> Engine {
+        Engine::of(WalkEngine::ClosedLoop)
+    }
+
+    /// (s, mx, my) over the trials, mx and my over those that did not fall.
+    fn summary(ts: &[NaoTrial]) -> (f64, f64, f64) {
+        let ok: Vec<_> = ts.iter().filter(|t| !t.measurement.fell).collect();
+        let n = ok.len().max(1) as f64;
+        (
+            ok.len() as f64 / ts.len() as f64,
+            ok.iter().map(|t| t.measurement.x_m).sum::<f64>() / n,
+            ok.iter().map(|t| t.measurement.y_m.abs()).sum::<f64>() / n,
+        )
+    }
+
+    /// Done-when of the pace issue: the expert set walks ≥ 4.0 m in 10 s with
+    /// s ≥ 0.7 over 100 trials, straight (my/mx ≤ 0.25), and as far as its
+    /// planned steps within 10 % (no sliding or lunging passed off as walking).
+    #[test]
+    fn the_expert_set_walks_at_the_leagues_pace_as_far_as_planned() {
+        let ts = run_many(
+            0,
+            &ParamValues::default(),
+            Batch {
+                seed0: 777,
+                n: 100,
+                threads: 2,
+            },
+            10.0,
+            SimSettings::default(),
+            closed(),
+        )
+        .unwrap();
+        let (s, mx, my) = summary(&ts);
+        assert!(s >= 0.7, "s = {s}");
+        assert!(mx >= 4.0, "mx = {mx}");
+        assert!(my / mx <= 0.25, "my/mx = {}", my / mx);
+        let model = NaoModel::with_params(0, &ParamValues::default()).unwrap();
+        let gait = Gait::with_config(&model, ParamValues::default().walk(), 10.0, GAIT);
+        let planned = gait.state(10.0).hip[0] - gait.state(0.0).hip[0];
+        assert!(
+            (mx - planned).abs() <= 0.1 * planned,
+            "walked {mx} m, planned {planned} m"
+        );
+    }
+
+    /// The feedback is what keeps the fast walk going: without it the expert
+    /// set falls more or walks clearly shorter (0.15 m is five standard errors
+    /// of 20 trials' mean).
+    #[test]
+    fn the_feedback_is_used() {
+        let go = |engine: Engine| {
+            let ts = run_many(
+                0,
+                &ParamValues::default(),
+                Batch {
+                    seed0: 3,
+                    n: 20,
+                    threads: 2,
+                },
+                10.0,
+                SimSettings::default(),
+                engine,
+            )
+            .unwrap();
+            summary(&ts)
+        };
+        let (s, mx, _) = go(closed());
+        let off = Engine {
+            feedback: None,
+            ..closed()
+        };
+        let (s_off, mx_off, _) = go(off);
+        assert!(
+            s_off < s - 0.2 || mx_off < mx - 0.15,
+            "with feedback s {s} mx {mx}, without s {s_off} mx {mx_off}"
+        );
+    }
+
+    #[test]
+    fn same_seed_same_bits_and_a_walk_of_its_own() {
+        let p = ParamValues::default();
+        let d = SimSettings::default();
+        let a = run(0, &p, 11, 3.0, d, closed()).unwrap();
+        let b = run(0, &p, 11, 3.0, d, closed()).unwrap();
+        assert_eq!(a.measurement.x_m.to_bits(), b.measurement.x_m.to_bits());
+        assert_eq!(a.measurement.y_m.to_bits(), b.measurement.y_m.to_bits());
+        let c = run(0, &p, 12, 3.0, d, closed()).unwrap();
+        assert_ne!(a.measurement.x_m.to_bits(), c.measurement.x_m.to_bits());
+        let open = run(0, &p, 11, 3.0, d, Engine::of(WalkEngine::OpenLoop)).unwrap();
+        assert_ne!(a.measurement.x_m.to_bits(), open.measurement.x_m.to_bits());
+    }
+
+    /// The worst excess over its stops during one trial, rad: of the hip
+    /// yaw-pitch joints (`le1`) and of every other joint, each with where.
+    fn worst_excess(params: &ParamValues, seed: u64) -> [(f64, String); 2] {
+        let model = NaoModel::with_params(0, params).unwrap();
+        let mut worst = [(0.0, String::new()), (0.0, String::new())];
+        run_observed(
+            0,
+            params,
+            seed,
+            10.0,
+            SimSettings::default(),
+            closed(),
+            &mut |_, p| {
+                for (j, a) in model.joints.iter().zip(&p.joint_angles_rad) {
+                    let e = (j.limits_rad.0 - a).max(a - j.limits_rad.1);
+                    let w = &mut worst[usize::from(!j.name.ends_with("le1"))];
+                    if e > w.0 {
+                        *w = (e, format!("{} at {:.2} s", j.name, p.time_s));
+                    }
+                }
+            },
+        )
+        .unwrap();
+        worst
+    }
+
+    /// Every joint but the hip yaw-pitch stays within 1° of its stops on the
+    /// expert set and within 2° over the 16 corners of experiment 2's L with
+    /// its shortest steps and its centre (others at expert). The hip
+    /// yaw-pitch, held at 0 by the plan 1° below its stop, is loaded through
+    /// the pitch half of its axis by the stance hip's balancing torque beyond
+    /// what its motor holds and yields into the stop, where rapier's limit
+    /// row only pushes back once it is past: bounded at 2° on the expert set
+    /// and 4° over that half of L (without the feedback it stays under 1.2°).
+    /// L's 16 corners with 0.15 m steps overrun by up to 8° (ankle pitch) as
+    /// they fall in the first seconds: `docs/walk.md` has the measurements.
+    #[test]
+    fn joints_stay_near_their_stops_on_the_expert_set_and_the_short_step_half_of_l() {
+        let [yp, other] = worst_excess(&ParamValues::default(), 3);
+        let deg = |e: f64| e.to_degrees();
+        assert!(
+            other.0 <= 1f64.to_radians(),
+            "expert: {:.2}° {}",
+            deg(other.0),
+            other.1
+        );
+        assert!(
+            yp.0 <= 2f64.to_radians(),
+            "expert: {:.2}° {}",
+            deg(yp.0),
+            yp.1
+        );
+        let exp = protocol::Experiment::from_toml(include_str!(
+            "../../../experiments/physical-technical.toml"
+        ))
+        .unwrap();
+        let l = &exp.parameter;
+        let short = l.iter().position(|p| p.name == "xlength_step_max").unwrap();
+        let mut sets: Vec<Vec<(String, f64)>> = (0..1u32 << l.len())
+            .filter(|corner| corner >> short & 1 == 0)
+            .map(|corner| {
+                l.iter()
+                    .enumerate()
+                    .map(|(i, p)| {
+                        let v = if corner >> i & 1 == 1 {
+                            p.upper
+                        } else {
+                            p.lower
+                        };
+                        (p.name.clone(), v)
+                    })
+                    .collect()
+            })
+            .collect();
+        sets.push(
+            l.iter()
+                .map(|p| (p.name.clone(), (p.lower + p.upper) / 2.0))
+                .collect(),
+        );
+        assert_eq!(sets.len(), 17);
+        let (mut worst_yp, mut worst_other) = (0.0f64, 0.0f64);
+        for named in &sets {
+            let p = ParamValues::from_named(named).unwrap();
+            let [yp, other] = worst_excess(&p, 1);
+            worst_yp = worst_yp.max(yp.0);
+            worst_other = worst_other.max(other.0);
+            let (o, y) = (deg(other.0), deg(yp.0));
+            assert!(o <= 2.0, "{named:?}: {o:.2}° {}", other.1);
+            assert!(y <= 4.0, "{named:?}: hip yaw-pitch {y:.2}° {}", yp.1);
+        }
+        println!(
+            "over L: hip yaw-pitch {:.2}°, others {:.2}°",
+            deg(worst_yp),
+            deg(worst_other)
+        );
+    }
+}
