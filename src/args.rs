@@ -138,6 +138,20 @@ pub enum Command {
         #[arg(long)]
         csv: bool,
     },
+    /// What a run found: figures (SVG), Table IV (Markdown, JSON) and an index.html.
+    Report {
+        /// The run directory (only read; a running run is read as it stands).
+        dir: PathBuf,
+        /// Where to write (default: DIR/report).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Trials per Table IV column (Expert, Optim.1, Optim.2), seeds 777, 778, …
+        #[arg(long, default_value_t = 100)]
+        trials: u32,
+        /// Threads for Table IV's trials (default: cores).
+        #[arg(long)]
+        threads: Option<usize>,
+    },
     /// Verify a run's journal (`check`) or copy its valid records into a new run (`salvage`).
     #[command(subcommand)]
     Journal(JournalCommand),

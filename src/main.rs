@@ -91,6 +91,19 @@ fn dispatch(cli: Cli) -> Result<(), Failure> {
         Command::Watch(a) => commands::watch::watch(&a),
         Command::Clop(a) => commands::clop::clop(&a),
         Command::History { dir, json, csv } => commands::history::history(&dir, json, csv),
+        Command::Report {
+            dir,
+            out,
+            trials,
+            threads,
+        } => commands::report::report(
+            &dir,
+            out.as_deref(),
+            trials,
+            threads.unwrap_or_else(|| {
+                std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
+            }),
+        ),
         Command::Journal(j) => commands::journal::journal(j),
         Command::Bench(b) => commands::bench::bench(b),
         Command::Stand(a) => commands::stand::stand(&a),

@@ -731,6 +731,37 @@ pub fn read_run(dir: &Path) -> Result<RunView, RunError> {
     read_run_records(dir).map(|(view, _)| view)
 }
 
+/// The run in `dir` replayed from its journal as a resume replays it (the
+/// same CLOP state bit for bit, hence its Optim.2), without a lock and
+/// without writing: for reports on a finished or a running run.
+pub fn replay(dir: &Path) -> Result<Evolve, RunError> {
+    let scan = Journal::read(dir)?;
+    if let Some(e) = scan.damage(&Journal::path_in(dir)) {
+        return Err(e.into());
+    }
+    let records = scan.records();
+    let (exp, imported) = journaled_experiment(dir, &records)?;
+    let (mut ev, _) = Evolve::start(exp, &imported);
+    for rec in records {
+        if let Record::Outcome {
+            iteration,
+            trial,
+            seed,
+            measurement,
+            ..
+        } = rec
+        {
+            ev.apply(iteration, trial, seed, measurement)
+                .map_err(|e| RunError::Diverged {
+                    dir: dir.display().to_string(),
+                    iteration,
+                    why: e.to_string(),
+                })?;
+        }
+    }
+    Ok(ev)
+}
+
 /// [`read_run`], with the journal's records (one read of the file).
 fn read_run_records(dir: &Path) -> Result<(RunView, Vec<Record>), RunError> {
     let scan = Journal::read(dir)?;

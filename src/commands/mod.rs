@@ -11,6 +11,7 @@ pub mod ctl;
 pub mod history;
 pub mod journal;
 pub mod model;
+pub mod report;
 pub mod router;
 pub mod run;
 pub mod stand;

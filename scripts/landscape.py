@@ -1,0 +1,71 @@
+#!/usr/bin/env python3
+"""The closed-loop walk's landscape over experiment 2's L (docs/walk.md).
+
+Sweeps each parameter over its range (others at expert; mx and s per point)
+and runs a random search of uniformly drawn sets, each point with
+`naofarm trial --walk closed-loop --json`. Prints Markdown tables.
+
+    scripts/landscape.py [--bin target/release/naofarm] [--sets 200]
+"""
+import argparse
+import json
+import random
+import subprocess
+
+L = [  # experiments/physical-technical.toml
+    ("ThighRelHip2_Z", -0.08, -0.03, -0.040),
+    ("ratio_flexion", 0.60, 0.95, 0.730),
+    ("long_offset_MidAnkles_2_Torso_Init", 0.001, 0.030, 0.011),
+    ("height_lift", 0.025, 0.070, 0.042),
+    ("xlength_step_max", 0.020, 0.150, 0.080),
+]
+
+
+def trial(binary, params, trials, seed):
+    cmd = [binary, "trial", "--walk", "closed-loop", "--json",
+           "--trials", str(trials), "--seed", str(seed)]
+    for k, v in params.items():
+        cmd += ["--param", f"{k}={v}"]
+    out = subprocess.run(cmd, check=True, capture_output=True, text=True)
+    return json.loads(out.stdout)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--bin", default="target/release/naofarm")
+    ap.add_argument("--points", type=int, default=9)
+    ap.add_argument("--trials", type=int, default=20)
+    ap.add_argument("--sets", type=int, default=200)
+    ap.add_argument("--set-trials", type=int, default=10)
+    a = ap.parse_args()
+    print(f"## Sweeps ({a.trials} trials per point, seed 3; others at expert)\n")
+    for name, lo, hi, _ in L:
+        print(f"### {name}\n\n| value | s | mx (m) | my (m) |\n|---|---|---|---|")
+        for i in range(a.points):
+            v = lo + (hi - lo) * i / (a.points - 1)
+            r = trial(a.bin, {name: round(v, 5)}, a.trials, 3)
+            print(f"| {v:.4f} | {r['s']:.2f} | {r['mx']:.3f} | {r['my']:.3f} |")
+        print()
+    rng = random.Random(1)
+    rows = []
+    for k in range(a.sets):
+        p = {n: round(rng.uniform(lo, hi), 5) for n, lo, hi, _ in L}
+        r = trial(a.bin, p, a.set_trials, 1000 + 100 * k)
+        rows.append((r["mx"] if r["s"] >= 0.9 else -1.0, r, p))
+    ok = [x for x in rows if x[1]["s"] >= 0.9]
+    mxs = sorted(x[1]["mx"] for x in rows)
+    print(f"## Random search ({a.sets} sets drawn uniformly from L, "
+          f"{a.set_trials} trials each)\n")
+    print(f"- sets with s ≥ 0.9: {len(ok)} of {len(rows)}")
+    print(f"- mx over all sets: min {mxs[0]:.3f}, median {mxs[len(mxs)//2]:.3f}, "
+          f"max {mxs[-1]:.3f} m")
+    print("\nThe ten best sets with s ≥ 0.9:\n")
+    print("| mx | s | my | " + " | ".join(n for n, *_ in L) + " |")
+    print("|---" * (3 + len(L)) + "|")
+    for _, r, p in sorted(ok, key=lambda x: -x[0])[:10]:
+        print(f"| {r['mx']:.3f} | {r['s']:.2f} | {r['my']:.3f} | "
+              + " | ".join(f"{p[n]:.4f}" for n, *_ in L) + " |")
+
+
+if __name__ == "__main__":
+    main()

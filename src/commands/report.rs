@@ -1,0 +1,554 @@
+//! `naofarm report RUN_DIR`: what a run found, as the paper shows it — each
+//! parameter against the iteration and each pair against each other coloured
+//! by decision (Fig. 1, 3c, 5, 6), decisions per 50 iterations, s and mx with
+//! ν′'s, Table IV (Expert, Optim.1, Optim.2 over N trials, Markdown and JSON)
+//! and an `index.html` that shows it all. Only reads the run directory.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use anyhow::anyhow;
+use coordinator::evolve::DecidedIteration;
+use coordinator::run::{read_run, replay};
+use plotters::prelude::*;
+use protocol::{pickout::stats, Decision, Experiment, Stats, TrialRequest};
+
+use crate::common::{note_tail, Failure};
+
+/// The first seed of Table IV's trials (the seed of the paper's table runs).
+pub const TABLE_SEED: u64 = 777;
+const SIZE: (u32, u32) = (720, 360);
+const GREY: RGBColor = RGBColor(150, 150, 150);
+
+/// One row (column in the paper) of Table IV.
+struct Row {
+    name: &'static str,
+    params: Vec<f64>,
+    stats: Stats,
+}
+
+/// Writes the report of the run in `dir` into `out` (default `DIR/report`).
+pub fn report(dir: &Path, out: Option<&Path>, trials: u32, threads: usize) -> Result<(), Failure> {
+    if trials == 0 || trials > 100_000 {
+        return Err(Failure::Usage(anyhow!(
+            "--trials {trials}: give 1 to 100000 trials per Table IV row"
+        )));
+    }
+    let view = read_run(dir).map_err(|e| match e {
+        coordinator::run::RunError::Journal(coordinator::journal::JournalError::Io { .. }) => {
+            Failure::Usage(e.into())
+        }
+        e => Failure::Job(e.into()),
+    })?;
+    note_tail(dir, &view);
+    let exp = view.experiment.clone();
+    let decided = &view.decided;
+    let out = out.map_or_else(|| dir.join("report"), Path::to_path_buf);
+    std::fs::create_dir_all(&out)
+        .map_err(|e| Failure::Usage(anyhow!("--out {}: {e}", out.display())))?;
+    let write = |name: &str, text: &str| {
+        std::fs::write(out.join(name), text)
+            .map_err(|e| Failure::Job(anyhow!("{}: {e}", out.join(name).display())))
+    };
+    let job = |e: anyhow::Error| Failure::Job(e);
+    let mut figures = Vec::new();
+    for (i, p) in exp.parameter.iter().enumerate() {
+        let name = format!("param-{}.svg", p.name);
+        write(&name, &parameter_figure(&exp, decided, i).map_err(job)?)?;
+        figures.push((name, format!("{} against the iteration", p.name)));
+    }
+    for i in 0..exp.parameter.len() {
+        for j in i + 1..exp.parameter.len() {
+            let (a, b) = (&exp.parameter[i].name, &exp.parameter[j].name);
+            let name = format!("pair-{a}-{b}.svg");
+            write(&name, &pair_figure(&exp, decided, i, j).map_err(job)?)?;
+            figures.push((name, format!("{b} against {a}")));
+        }
+    }
+    write("decisions.svg", &decisions_figure(decided).map_err(job)?)?;
+    figures.push(("decisions.svg".into(), "decisions per 50 iterations".into()));
+    write("progress.svg", &progress_figure(decided).map_err(job)?)?;
+    figures.push((
+        "progress.svg".into(),
+        "s and mx of every iteration, ν′'s mx".into(),
+    ));
+
+    let rows = table_iv(dir, &exp, decided, trials, threads)?;
+    let (md, json) = table_text(&exp, &rows, trials);
+    write("table4.md", &md)?;
+    write("table4.json", &json)?;
+    write(
+        "index.html",
+        &index_html(&exp, &view, &rows, trials, &figures),
+    )?;
+    outln!("report of {} in {}", dir.display(), out.display());
+    outln!("{md}");
+    Ok(())
+}
+
+/// The colour and fill of a decision's points: ACCEPT white with a dark
+/// edge, EQUIVALENT grey, REJECT black (the paper's Fig. 1).
+fn style(d: Decision) -> ShapeStyle {
+    match d {
+        Decision::Accept => BLACK.stroke_width(1),
+        Decision::Equivalent => GREY.filled(),
+        Decision::Reject => BLACK.filled(),
+    }
+}
+
+fn range(lo: f64, hi: f64) -> std::ops::Range<f64> {
+    if hi > lo {
+        lo..hi
+    } else {
+        lo - 1.0..lo + 1.0
+    }
+}
+
+/// One SVG document from a drawing closure.
+fn svg(
+    draw: impl FnOnce(&DrawingArea<SVGBackend<'_>, plotters::coord::Shift>) -> anyhow::Result<()>,
+) -> anyhow::Result<String> {
+    let mut text = String::new();
+    {
+        let root = SVGBackend::with_string(&mut text, SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+        draw(&root)?;
+        root.present().map_err(|e| anyhow!("{e}"))?;
+    }
+    Ok(text)
+}
+
+fn e<E: std::fmt::Display>(err: E) -> anyhow::Error {
+    anyhow!("drawing: {err}")
+}
+
+/// Parameter `i` against the iteration, one point per decided iteration,
+/// ν′'s value as a line.
+fn parameter_figure(
+    exp: &Experiment,
+    decided: &[DecidedIteration],
+    i: usize,
+) -> anyhow::Result<String> {
+    let p = &exp.parameter[i];
+    let n = decided.last().map_or(1, |d| d.iteration + 1) as f64;
+    svg(|root| {
+        let mut chart = ChartBuilder::on(root)
+            .caption(&p.name, ("sans-serif", 18))
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..n, range(p.lower, p.upper))
+            .map_err(e)?;
+        chart
+            .configure_mesh()
+            .x_desc("iteration")
+            .y_desc(&p.name)
+            .draw()
+            .map_err(e)?;
+        let best: Vec<(f64, f64)> = decided
+            .iter()
+            .filter_map(|d| d.best.as_ref().map(|b| (d.iteration as f64, b.params[i])))
+            .collect();
+        chart
+            .draw_series(LineSeries::new(best, BLUE.stroke_width(2)))
+            .map_err(e)?;
+        chart
+            .draw_series(
+                decided
+                    .iter()
+                    .map(|d| Circle::new((d.iteration as f64, d.params[i]), 3, style(d.decision))),
+            )
+            .map_err(e)?;
+        Ok(())
+    })
+}
+
+/// Parameter `j` against parameter `i`, coloured by decision.
+fn pair_figure(
+    exp: &Experiment,
+    decided: &[DecidedIteration],
+    i: usize,
+    j: usize,
+) -> anyhow::Result<String> {
+    let (a, b) = (&exp.parameter[i], &exp.parameter[j]);
+    svg(|root| {
+        let mut chart = ChartBuilder::on(root)
+            .caption(format!("{} against {}", b.name, a.name), ("sans-serif", 18))
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(60)
+            .build_cartesian_2d(range(a.lower, a.upper), range(b.lower, b.upper))
+            .map_err(e)?;
+        chart
+            .configure_mesh()
+            .x_desc(&a.name)
+            .y_desc(&b.name)
+            .draw()
+            .map_err(e)?;
+        chart
+            .draw_series(
+                decided
+                    .iter()
+                    .map(|d| Circle::new((d.params[i], d.params[j]), 3, style(d.decision))),
+            )
+            .map_err(e)?;
+        Ok(())
+    })
+}
+
+/// Decisions per 50 iterations, stacked: REJECT (black) at the bottom, then
+/// EQUIVALENT (grey), then ACCEPT (white, dark edge).
+fn decisions_figure(decided: &[DecidedIteration]) -> anyhow::Result<String> {
+    let blocks = decided.chunks(50).collect::<Vec<_>>();
+    let counts: Vec<[u32; 3]> = blocks
+        .iter()
+        .map(|b| {
+            let c = |d| b.iter().filter(|x| x.decision == d).count() as u32;
+            [
+                c(Decision::Reject),
+                c(Decision::Equivalent),
+                c(Decision::Accept),
+            ]
+        })
+        .collect();
+    svg(|root| {
+        let mut chart = ChartBuilder::on(root)
+            .caption("decisions per 50 iterations", ("sans-serif", 18))
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(40)
+            .build_cartesian_2d(0.0..(blocks.len().max(1) * 50) as f64, 0.0..50.0)
+            .map_err(e)?;
+        chart
+            .configure_mesh()
+            .x_desc("iteration (REJECT black, EQUIVALENT grey, ACCEPT white)")
+            .y_desc("decisions")
+            .draw()
+            .map_err(e)?;
+        for (k, c) in counts.iter().enumerate() {
+            let x0 = (k * 50) as f64 + 4.0;
+            let x1 = x0 + 42.0;
+            let mut y = 0.0;
+            for (n, s) in c
+                .iter()
+                .zip([BLACK.filled(), GREY.filled(), BLACK.stroke_width(1)])
+            {
+                let top = y + f64::from(*n);
+                chart
+                    .draw_series(std::iter::once(Rectangle::new([(x0, y), (x1, top)], s)))
+                    .map_err(e)?;
+                y = top;
+            }
+        }
+        Ok(())
+    })
+}
+
+/// mx of every iteration (points by decision; a fallen-only iteration at 0),
+/// s (green line, right scale ×5 m) and ν′'s mx (blue line).
+fn progress_figure(decided: &[DecidedIteration]) -> anyhow::Result<String> {
+    let n = decided.last().map_or(1, |d| d.iteration + 1) as f64;
+    let top = decided
+        .iter()
+        .filter_map(|d| d.stats.mx)
+        .fold(1.0f64, f64::max)
+        * 1.1;
+    svg(|root| {
+        let mut chart = ChartBuilder::on(root)
+            .caption(
+                "mx (points), s × max (green), ν′'s mx (blue)",
+                ("sans-serif", 18),
+            )
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(50)
+            .build_cartesian_2d(0.0..n, 0.0..top)
+            .map_err(e)?;
+        chart
+            .configure_mesh()
+            .x_desc("iteration")
+            .y_desc("m")
+            .draw()
+            .map_err(e)?;
+        chart
+            .draw_series(LineSeries::new(
+                decided
+                    .iter()
+                    .map(|d| (d.iteration as f64, d.stats.s * top)),
+                GREEN.stroke_width(1),
+            ))
+            .map_err(e)?;
+        chart
+            .draw_series(LineSeries::new(
+                decided.iter().filter_map(|d| {
+                    d.best
+                        .as_ref()
+                        .and_then(|b| b.stats.mx)
+                        .map(|mx| (d.iteration as f64, mx))
+                }),
+                BLUE.stroke_width(2),
+            ))
+            .map_err(e)?;
+        chart
+            .draw_series(decided.iter().map(|d| {
+                Circle::new(
+                    (d.iteration as f64, d.stats.mx.unwrap_or(0.0)),
+                    2,
+                    style(d.decision),
+                )
+            }))
+            .map_err(e)?;
+        Ok(())
+    })
+}
+
+/// Expert, Optim.1 (ν′) and Optim.2 (CLOP's mean), each over the same
+/// `trials` seeds from [`TABLE_SEED`], each trial exactly as a farm worker
+/// runs it.
+fn table_iv(
+    dir: &Path,
+    exp: &Experiment,
+    decided: &[DecidedIteration],
+    trials: u32,
+    threads: usize,
+) -> Result<Vec<Row>, Failure> {
+    // The experiment's expert value, else the registry's, else the centre of L.
+    let expert: Vec<f64> = exp
+        .parameter
+        .iter()
+        .map(|p| {
+            p.expert
+                .or_else(|| protocol::params::find(&p.name).map(|k| k.default))
+                .unwrap_or((p.lower + p.upper) / 2.0)
+        })
+        .collect();
+    let optim1 = decided
+        .iter()
+        .rev()
+        .find_map(|d| d.best.as_ref().map(|b| b.params.clone()));
+    let optim2 = replay(dir).map_err(|e| Failure::Job(e.into()))?.optim2();
+    let mut rows = vec![("Expert", expert)];
+    rows.extend(optim1.map(|p| ("Optim.1", p)));
+    rows.push(("Optim.2", optim2));
+    rows.into_iter()
+        .map(|(name, params)| {
+            let ms = run_trials(exp, &params, trials, threads)?;
+            Ok(Row {
+                name,
+                stats: stats(&ms),
+                params,
+            })
+        })
+        .collect()
+}
+
+/// `trials` trials of one parameter set, in parallel, in seed order.
+fn run_trials(
+    exp: &Experiment,
+    params: &[f64],
+    trials: u32,
+    threads: usize,
+) -> Result<Vec<protocol::measurement::Measurement>, Failure> {
+    let request = |k: u32| TrialRequest {
+        run: String::new(),
+        iteration: 0,
+        trial: k,
+        seed: TABLE_SEED + u64::from(k),
+        model: exp.model,
+        robot_type: exp.robot_type,
+        duration_s: exp.trial_duration_s,
+        params: exp.full_params(params),
+        dispatch: 0,
+        physics: exp.physics,
+        walk: exp.walk,
+    };
+    let next = std::sync::atomic::AtomicU32::new(0);
+    let mut done: Vec<(u32, Result<protocol::measurement::Measurement, String>)> =
+        std::thread::scope(|s| {
+            let handles: Vec<_> = (0..threads.clamp(1, 64))
+                .map(|_| {
+                    s.spawn(|| {
+                        let mut mine = Vec::new();
+                        loop {
+                            let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                            if k >= trials {
+                                break mine;
+                            }
+                            mine.push((
+                                k,
+                                worker::run_trial(&request(k)).map_err(|e| e.to_string()),
+                            ));
+                        }
+                    })
+                })
+                .collect();
+            handles
+                .into_iter()
+                .flat_map(|h| h.join().unwrap_or_default())
+                .collect()
+        });
+    done.sort_by_key(|(k, _)| *k);
+    if done.len() != trials as usize {
+        return Err(Failure::Job(anyhow!(
+            "{} of {trials} Table IV trials came back",
+            done.len()
+        )));
+    }
+    done.into_iter()
+        .map(|(k, r)| r.map_err(|e| Failure::Job(anyhow!("Table IV trial {k}: {e}"))))
+        .collect()
+}
+
+fn cell(v: Option<f64>) -> String {
+    v.map_or("–".into(), |v| format!("{v:.3}"))
+}
+
+/// Table IV as Markdown and as JSON.
+fn table_text(exp: &Experiment, rows: &[Row], trials: u32) -> (String, String) {
+    let expert_mx = rows.first().and_then(|r| r.stats.mx);
+    let ratio = |r: &Row| match (r.stats.mx, expert_mx) {
+        (Some(a), Some(b)) if b > 0.0 => Some(a / b),
+        _ => None,
+    };
+    let mut md = format!(
+        "Table IV of {} ({} trials each, seeds {}–{}, walk {})\n\n| | {} |\n|---|{}\n",
+        exp.name,
+        trials,
+        TABLE_SEED,
+        TABLE_SEED + u64::from(trials) - 1,
+        exp.walk.name(),
+        rows.iter().map(|r| r.name).collect::<Vec<_>>().join(" | "),
+        "---|".repeat(rows.len())
+    );
+    let mut line = |label: &str, f: &dyn Fn(&Row) -> String| {
+        let cells: Vec<String> = rows.iter().map(f).collect();
+        let _ = writeln!(md, "| {label} | {} |", cells.join(" | "));
+    };
+    for (i, p) in exp.parameter.iter().enumerate() {
+        line(&p.name, &|r| format!("{:.4}", r.params[i]));
+    }
+    line("s", &|r| format!("{:.2}", r.stats.s));
+    line("mx (m)", &|r| cell(r.stats.mx));
+    line("my (m)", &|r| cell(r.stats.my));
+    line("ex (m)", &|r| cell(r.stats.ex));
+    line("ey (m)", &|r| cell(r.stats.ey));
+    line("mx / Expert", &|r| {
+        ratio(r).map_or("–".into(), |v| format!("{v:.2}×"))
+    });
+    let json: Vec<serde_json::Value> = rows
+        .iter()
+        .map(|r| {
+            let params: serde_json::Map<String, serde_json::Value> = exp
+                .parameter
+                .iter()
+                .zip(&r.params)
+                .map(|(p, v)| (p.name.clone(), serde_json::json!(v)))
+                .collect();
+            serde_json::json!({
+                "name": r.name,
+                "params": params,
+                "trials": r.stats.trials,
+                "s": r.stats.s,
+                "mx": r.stats.mx,
+                "my": r.stats.my,
+                "ex": r.stats.ex,
+                "ey": r.stats.ey,
+                "mx_over_expert": ratio(r),
+            })
+        })
+        .collect();
+    let json = serde_json::json!({
+        "experiment": exp.name,
+        "seed0": TABLE_SEED,
+        "trials": trials,
+        "walk": exp.walk.name(),
+        "columns": json,
+    });
+    (md, format!("{json:#}\n"))
+}
+
+fn escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// One self-contained page: the run's facts, Table IV and every figure.
+fn index_html(
+    exp: &Experiment,
+    view: &coordinator::run::RunView,
+    rows: &[Row],
+    trials: u32,
+    figures: &[(String, String)],
+) -> String {
+    let c = |d| view.decided.iter().filter(|x| x.decision == d).count();
+    let mut h = String::new();
+    let _ = write!(
+        h,
+        "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
+         <title>naofarm report: {name}</title>\
+         <style>body{{font-family:sans-serif;max-width:1500px;margin:1em auto}}\
+         table{{border-collapse:collapse}}td,th{{border:1px solid #aaa;padding:2px 8px;text-align:right}}\
+         figure{{display:inline-block;margin:4px}}img{{width:720px;height:360px}}</style>\
+         </head><body>\n<h1>{name}</h1>\n<p>run id {id}, seed {seed}, robot type {ty}, walk {walk}, \
+         model {model:?}; {n} of {planned} iterations decided × {tpi} trials of {dur} s: \
+         {a} ACCEPT, {q} EQUIVALENT, {r} REJECT.</p>\n",
+        name = escape(&exp.name),
+        id = escape(view.id.as_deref().unwrap_or("–")),
+        seed = exp.seed,
+        ty = exp.robot_type,
+        walk = exp.walk.name(),
+        model = exp.model,
+        n = view.decided.len(),
+        planned = exp.iterations,
+        tpi = exp.trials_per_iteration,
+        dur = exp.trial_duration_s,
+        a = c(Decision::Accept),
+        q = c(Decision::Equivalent),
+        r = c(Decision::Reject),
+    );
+    let _ = write!(
+        h,
+        "<h2>Table IV</h2>\n<p>{trials} trials each from seed {TABLE_SEED}.</p>\n<table>\n<tr><th></th>"
+    );
+    for r in rows {
+        let _ = write!(h, "<th>{}</th>", r.name);
+    }
+    h += "</tr>\n";
+    let expert_mx = rows.first().and_then(|r| r.stats.mx);
+    let mut line = |label: &str, f: &dyn Fn(&Row) -> String| {
+        let _ = write!(h, "<tr><th>{}</th>", escape(label));
+        for r in rows {
+            let _ = write!(h, "<td>{}</td>", f(r));
+        }
+        h += "</tr>\n";
+    };
+    for (i, p) in exp.parameter.iter().enumerate() {
+        line(&p.name, &|r| format!("{:.4}", r.params[i]));
+    }
+    line("s", &|r| format!("{:.2}", r.stats.s));
+    line("mx (m)", &|r| cell(r.stats.mx));
+    line("my (m)", &|r| cell(r.stats.my));
+    line("mx / Expert", &|r| match (r.stats.mx, expert_mx) {
+        (Some(a), Some(b)) if b > 0.0 => format!("{:.2}×", a / b),
+        _ => "–".into(),
+    });
+    h += "</table>\n<h2>Figures</h2>\n";
+    for (file, caption) in figures {
+        let _ = writeln!(
+            h,
+            "<figure><img src=\"{f}\" alt=\"{c}\"><figcaption>{c}</figcaption></figure>",
+            f = escape(file),
+            c = escape(caption)
+        );
+    }
+    // For a reader's tools (and the browser test): how many images decoded.
+    h += "<script>window.addEventListener('load', () => {\
+          const imgs = [...document.images];\
+          const ok = imgs.filter(i => i.complete && i.naturalWidth > 0).length;\
+          document.body.dataset.imagesLoaded = ok;\
+          document.body.dataset.imagesFailed = imgs.length - ok;\
+          });</script>\n</body></html>\n";
+    h
+}

@@ -1,0 +1,210 @@
+//! End-to-end tests of `naofarm report`: the files it writes read back (SVG
+//! parsed, points counted, Table IV's columns and parameters), the run
+//! directory left as it was, and the page opened in a real headless browser.
+#![allow(clippy::unwrap_used)]
+
+mod util;
+
+use std::path::{Path, PathBuf};
+
+use util::{events, fails, naofarm, root, scratch, succeed};
+
+/// A finished 24-iteration synthetic run in `dir/run`; returns its `run
+/// --json` finished line.
+fn synthetic_run(dir: &Path) -> serde_json::Value {
+    let out = succeed(
+        naofarm()
+            .args(["run", "--json", "--workers", "2", "--iterations", "24"])
+            .arg(root().join("experiments/synthetic.toml"))
+            .arg("--out")
+            .arg(dir.join("run")),
+    );
+    events(&out.stdout).finished.expect("a finished line")
+}
+
+fn report(dir: &Path) -> PathBuf {
+    let out = dir.join("report");
+    succeed(
+        naofarm()
+            .arg("report")
+            .arg(dir.join("run"))
+            .arg("--out")
+            .arg(&out)
+            .args(["--trials", "8"]),
+    );
+    out
+}
+
+/// The circles of an SVG document (it must parse).
+fn circles(path: &Path) -> usize {
+    let text = std::fs::read_to_string(path).unwrap();
+    let doc =
+        roxmltree::Document::parse(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    assert_eq!(doc.root_element().tag_name().name(), "svg");
+    doc.descendants()
+        .filter(|n| n.tag_name().name() == "circle")
+        .count()
+}
+
+fn tree_bytes(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    let mut v: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| {
+            let p = e.unwrap().path();
+            let b = std::fs::read(&p).unwrap_or_default();
+            (p, b)
+        })
+        .collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn report_writes_every_figure_and_table_iv_and_leaves_the_run_as_it_was() {
+    let dir = scratch("report");
+    let finished = synthetic_run(&dir);
+    let before = tree_bytes(&dir.join("run"));
+    let out = report(&dir);
+    assert_eq!(tree_bytes(&dir.join("run")), before, "report only reads");
+
+    let h = succeed(naofarm().arg("history").arg(dir.join("run")).arg("--json"));
+    let rows: Vec<serde_json::Value> = serde_json::from_slice(&h.stdout).unwrap();
+    assert_eq!(rows.len(), 24);
+    let names: Vec<String> = rows[0]["params"]
+        .as_object()
+        .unwrap()
+        .keys()
+        .cloned()
+        .collect();
+    assert_eq!(names.len(), 5);
+    // One point per decided iteration in every parameter, pair and progress figure.
+    for n in &names {
+        assert_eq!(circles(&out.join(format!("param-{n}.svg"))), 24, "{n}");
+    }
+    let mut pairs = 0;
+    for e in std::fs::read_dir(&out).unwrap() {
+        let p = e.unwrap().path();
+        let f = p.file_name().unwrap().to_string_lossy().to_string();
+        if f.starts_with("pair-") {
+            assert_eq!(circles(&p), 24, "{f}");
+            pairs += 1;
+        }
+    }
+    assert_eq!(pairs, 10, "each pair of five parameters");
+    assert_eq!(circles(&out.join("progress.svg")), 24);
+    circles(&out.join("decisions.svg"));
+
+    // Table IV: Expert, Optim.1 (ν′, the row `history` flags) and Optim.2
+    // (CLOP's mean, as the run's finished line gave it), 8 trials each.
+    let t: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("table4.json")).unwrap()).unwrap();
+    let cols = t["columns"].as_array().unwrap();
+    let col_names: Vec<&str> = cols.iter().map(|c| c["name"].as_str().unwrap()).collect();
+    assert_eq!(col_names, ["Expert", "Optim.1", "Optim.2"]);
+    for c in cols {
+        assert_eq!(c["trials"], 8);
+        assert!(c["s"].as_f64().is_some_and(|s| (0.0..=1.0).contains(&s)));
+    }
+    let best = rows.iter().find(|r| r["best"] == true).unwrap();
+    assert_eq!(cols[1]["params"], best["params"]);
+    let expert = serde_json::json!({
+        "ThighRelHip2_Z": -0.04, "ratio_flexion": 0.73,
+        "long_offset_MidAnkles_2_Torso_Init": 0.011, "height_lift": 0.042,
+        "xlength_step_max": 0.08,
+    });
+    assert_eq!(cols[0]["params"], expert);
+    assert_eq!(cols[0]["mx_over_expert"], 1.0);
+    for pair in finished["status"]["optim2"].as_array().unwrap() {
+        let (name, value) = (pair[0].as_str().unwrap(), &pair[1]);
+        assert_eq!(&cols[2]["params"][name], value, "Optim.2 {name}");
+    }
+    let md = std::fs::read_to_string(out.join("table4.md")).unwrap();
+    assert!(md.contains("| | Expert | Optim.1 | Optim.2 |"), "{md}");
+    let page = std::fs::read_to_string(out.join("index.html")).unwrap();
+    let imgs = page.matches("<img ").count();
+    assert_eq!(imgs, 5 + 10 + 2, "every figure on the page");
+    assert!(page.contains("Optim.1"));
+
+    // Bad input: no run there, no trials.
+    let e = fails(naofarm().arg("report").arg(dir.join("nowhere")), 2);
+    assert!(e.contains("journal"), "{e}");
+    let e = fails(
+        naofarm()
+            .arg("report")
+            .arg(dir.join("run"))
+            .args(["--trials", "0"]),
+        2,
+    );
+    assert!(e.contains("--trials"), "{e}");
+}
+
+/// A browser the test can drive: `$NAOFARM_CHROMIUM`, else Debian's.
+fn chromium() -> Option<PathBuf> {
+    std::env::var_os("NAOFARM_CHROMIUM")
+        .map(PathBuf::from)
+        .or_else(|| Some(PathBuf::from("/usr/bin/chromium")))
+        .filter(|p| p.exists())
+}
+
+#[test]
+fn the_report_page_loads_in_a_real_browser_with_every_image() {
+    let Some(browser) = chromium() else {
+        eprintln!(
+            "SKIPPED: no Chromium at /usr/bin/chromium or $NAOFARM_CHROMIUM \
+             (`.ci/run` installs Debian's `chromium` package; run it as root)"
+        );
+        return;
+    };
+    let dir = scratch("report-browser");
+    synthetic_run(&dir);
+    let out = report(&dir);
+    let page = format!("file://{}", out.join("index.html").display());
+    let headless = |extra: &[&str]| {
+        let o = std::process::Command::new(&browser)
+            .args([
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--enable-logging=stderr",
+                "--v=0",
+                "--allow-file-access-from-files",
+                "--virtual-time-budget=10000",
+                &format!("--user-data-dir={}", dir.join("profile").display()),
+            ])
+            .args(extra)
+            .arg(&page)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        o
+    };
+    // The page's own script counts the images that decoded.
+    let dom = headless(&["--dump-dom"]);
+    let text = String::from_utf8_lossy(&dom.stdout);
+    assert!(
+        text.contains("data-images-loaded=\"17\"") && text.contains("data-images-failed=\"0\""),
+        "{}",
+        &text[..text.len().min(400)]
+    );
+    let log = String::from_utf8_lossy(&dom.stderr);
+    assert!(
+        !log.lines().any(|l| l.contains(":CONSOLE(")),
+        "console messages: {log}"
+    );
+    let shot = dir.join("shot.png");
+    headless(&[
+        &format!("--screenshot={}", shot.display()),
+        "--window-size=1400,1200",
+    ]);
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&shot).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    let px = &buf[..info.buffer_size()];
+    let first = &px[..4];
+    let differing = px
+        .chunks(info.color_type.samples())
+        .filter(|p| p[..3] != first[..3])
+        .count();
+    assert!(differing > px.len() / 200, "the screenshot is blank");
+}
