@@ -21,6 +21,10 @@ L = [  # experiments/physical-technical.toml
 ]
 
 
+def f(v, fmt=".3f"):
+    return "–" if v is None else format(v, fmt)
+
+
 def trial(binary, params, trials, seed):
     cmd = [binary, "trial", "--walk", "closed-loop", "--json",
            "--trials", str(trials), "--seed", str(seed)]
@@ -44,7 +48,7 @@ def main():
         for i in range(a.points):
             v = lo + (hi - lo) * i / (a.points - 1)
             r = trial(a.bin, {name: round(v, 5)}, a.trials, 3)
-            print(f"| {v:.4f} | {r['s']:.2f} | {r['mx']:.3f} | {r['my']:.3f} |")
+            print(f"| {v:.4f} | {r['s']:.2f} | {f(r['mx'])} | {f(r['my'])} |")
         print()
     rng = random.Random(1)
     rows = []
@@ -52,8 +56,9 @@ def main():
         p = {n: round(rng.uniform(lo, hi), 5) for n, lo, hi, _ in L}
         r = trial(a.bin, p, a.set_trials, 1000 + 100 * k)
         rows.append((r["mx"] if r["s"] >= 0.9 else -1.0, r, p))
+        r["mx"] = r["mx"] or 0.0
     ok = [x for x in rows if x[1]["s"] >= 0.9]
-    mxs = sorted(x[1]["mx"] for x in rows)
+    mxs = sorted(x[1]["mx"] for x in rows)  # a set whose trials all fell counts 0
     print(f"## Random search ({a.sets} sets drawn uniformly from L, "
           f"{a.set_trials} trials each)\n")
     print(f"- sets with s ≥ 0.9: {len(ok)} of {len(rows)}")
@@ -63,7 +68,7 @@ def main():
     print("| mx | s | my | " + " | ".join(n for n, *_ in L) + " |")
     print("|---" * (3 + len(L)) + "|")
     for _, r, p in sorted(ok, key=lambda x: -x[0])[:10]:
-        print(f"| {r['mx']:.3f} | {r['s']:.2f} | {r['my']:.3f} | "
+        print(f"| {r['mx']:.3f} | {r['s']:.2f} | {f(r['my'])} | "
               + " | ".join(f"{p[n]:.4f}" for n, *_ in L) + " |")
 
 

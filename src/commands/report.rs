@@ -229,13 +229,11 @@ fn decisions_figure(decided: &[DecidedIteration]) -> anyhow::Result<String> {
             let x0 = (k * 50) as f64 + 4.0;
             let x1 = x0 + 42.0;
             let mut y = 0.0;
-            for (n, s) in c
-                .iter()
-                .zip([BLACK.filled(), GREY.filled(), BLACK.stroke_width(1)])
-            {
+            for (n, fill) in c.iter().zip([BLACK, GREY, WHITE]) {
                 let top = y + f64::from(*n);
+                let edge = Rectangle::new([(x0, y), (x1, top)], BLACK.stroke_width(1));
                 chart
-                    .draw_series(std::iter::once(Rectangle::new([(x0, y), (x1, top)], s)))
+                    .draw_series([Rectangle::new([(x0, y), (x1, top)], fill.filled()), edge])
                     .map_err(e)?;
                 y = top;
             }
