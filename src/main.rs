@@ -4,7 +4,7 @@
 //! and the leaves they share: [`common`] (exit-code failure, experiment
 //! files, NAME=VALUE parameters), [`out`] (pipe-safe output), [`net`] (zenoh
 //! configuration and session), [`serve`] (serving a run with its view),
-//! [`view`] (the progress view). Leaves use no command; commands use no
+//! [`view`] (the progress view), [`render`] (a trial's animated replay). Leaves use no command; commands use no
 //! other command. Library logic belongs in the crates, not here.
 
 #[macro_use]
@@ -14,6 +14,7 @@ mod args;
 mod commands;
 mod common;
 mod net;
+mod render;
 mod serve;
 mod view;
 

@@ -22,6 +22,17 @@ fn synthetic_run(dir: &Path) -> serde_json::Value {
     events(&out.stdout).finished.expect("a finished line")
 }
 
+/// A 2-iteration run of experiment 2 (the NAO, closed-loop walk) in `dir/run`.
+fn nao_run(dir: &Path) {
+    succeed(
+        naofarm()
+            .args(["run", "--json", "--workers", "2", "--iterations", "2"])
+            .arg(root().join("experiments/physical-technical.toml"))
+            .arg("--out")
+            .arg(dir.join("run")),
+    );
+}
+
 fn report(dir: &Path) -> PathBuf {
     let out = dir.join("report");
     succeed(
@@ -156,7 +167,7 @@ fn the_report_page_loads_in_a_real_browser_with_every_image() {
         return;
     };
     let dir = scratch("report-browser");
-    synthetic_run(&dir);
+    nao_run(&dir);
     let out = report(&dir);
     let page = format!("file://{}", out.join("index.html").display());
     let headless = |extra: &[&str]| {
@@ -182,7 +193,7 @@ fn the_report_page_loads_in_a_real_browser_with_every_image() {
     let dom = headless(&["--dump-dom"]);
     let text = String::from_utf8_lossy(&dom.stdout);
     assert!(
-        text.contains("data-images-loaded=\"17\"") && text.contains("data-images-failed=\"0\""),
+        text.contains("data-images-loaded=\"19\"") && text.contains("data-images-failed=\"0\""),
         "{}",
         &text[..text.len().min(400)]
     );
@@ -207,4 +218,42 @@ fn the_report_page_loads_in_a_real_browser_with_every_image() {
         .filter(|p| p[..3] != first[..3])
         .count();
     assert!(differing > px.len() / 200, "the screenshot is blank");
+}
+
+#[test]
+fn a_nao_report_has_an_animated_replay_of_expert_and_optim1() {
+    let dir = scratch("report-nao");
+    nao_run(&dir);
+    let out = report(&dir);
+    let page = std::fs::read_to_string(out.join("index.html")).unwrap();
+    for name in ["replay-expert.svg", "replay-optim1.svg"] {
+        assert!(
+            page.contains(&format!("src=\"{name}\"")),
+            "{name} on the page"
+        );
+        let text = std::fs::read_to_string(out.join(name)).unwrap();
+        let doc = roxmltree::Document::parse(&text).unwrap();
+        let lines: Vec<_> = doc
+            .descendants()
+            .filter(|n| n.tag_name().name() == "line")
+            .collect();
+        let moving = lines
+            .iter()
+            .filter(|l| {
+                l.children()
+                    .filter(|c| c.tag_name().name() == "animate")
+                    .count()
+                    == 4
+            })
+            .count();
+        // Every body but the torso, in the side and the top view.
+        assert!(moving >= 2 * 20, "{name}: {moving} moving segments");
+        let frames = doc
+            .descendants()
+            .find(|n| n.tag_name().name() == "animate")
+            .and_then(|a| a.attribute("values"))
+            .map(|v| v.split(';').count())
+            .unwrap();
+        assert_eq!(frames, 10 * 50 / 4, "{name}: 10 s at 12.5 frames/s");
+    }
 }

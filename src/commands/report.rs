@@ -11,9 +11,13 @@ use anyhow::anyhow;
 use coordinator::evolve::DecidedIteration;
 use coordinator::run::{read_run, replay};
 use plotters::prelude::*;
-use protocol::{pickout::stats, Decision, Experiment, Stats, TrialRequest};
+use protocol::{
+    params::ParamValues, pickout::stats, Decision, Experiment, Stats, TrialModel, TrialRequest,
+};
+use worker::nao::{model::NaoModel, sim::SimSettings, trial};
 
 use crate::common::{note_tail, Failure};
+use crate::render;
 
 /// The first seed of Table IV's trials (the seed of the paper's table runs).
 pub const TABLE_SEED: u64 = 777;
@@ -74,12 +78,20 @@ pub fn report(dir: &Path, out: Option<&Path>, trials: u32, threads: usize) -> Re
     ));
 
     let rows = table_iv(dir, &exp, decided, trials, threads)?;
+    let mut replays = Vec::new();
+    if exp.model == TrialModel::Nao {
+        for r in rows.iter().filter(|r| r.name != "Optim.2") {
+            let file = format!("replay-{}.svg", r.name.to_lowercase().replace('.', ""));
+            write(&file, &replay_svg(&exp, &r.params, r.name)?)?;
+            replays.push((file, format!("{}: trial seed {TABLE_SEED}", r.name)));
+        }
+    }
     let (md, json) = table_text(&exp, &rows, trials);
     write("table4.md", &md)?;
     write("table4.json", &json)?;
     write(
         "index.html",
-        &index_html(&exp, &view, &rows, trials, &figures),
+        &index_html(&exp, &view, &rows, trials, &figures, &replays),
     )?;
     outln!("report of {} in {}", dir.display(), out.display());
     outln!("{md}");
@@ -479,6 +491,7 @@ fn index_html(
     rows: &[Row],
     trials: u32,
     figures: &[(String, String)],
+    replays: &[(String, String)],
 ) -> String {
     let c = |d| view.decided.iter().filter(|x| x.decision == d).count();
     let mut h = String::new();
@@ -488,7 +501,7 @@ fn index_html(
          <title>naofarm report: {name}</title>\
          <style>body{{font-family:sans-serif;max-width:1500px;margin:1em auto}}\
          table{{border-collapse:collapse}}td,th{{border:1px solid #aaa;padding:2px 8px;text-align:right}}\
-         figure{{display:inline-block;margin:4px}}img{{width:720px;height:360px}}</style>\
+         figure{{display:inline-block;margin:4px;vertical-align:top}}img{{width:720px;height:360px}}img.replay{{width:auto;height:auto;max-width:1400px}}</style>\
          </head><body>\n<h1>{name}</h1>\n<p>run id {id}, seed {seed}, robot type {ty}, walk {walk}, \
          model {model:?}; {n} of {planned} iterations decided × {tpi} trials of {dur} s: \
          {a} ACCEPT, {q} EQUIVALENT, {r} REJECT.</p>\n",
@@ -532,7 +545,20 @@ fn index_html(
         (Some(a), Some(b)) if b > 0.0 => format!("{:.2}×", a / b),
         _ => "–".into(),
     });
-    h += "</table>\n<h2>Figures</h2>\n";
+    h += "</table>\n";
+    if !replays.is_empty() {
+        h += "<h2>Watch them walk</h2>\n<p>The first Table IV trial of each set, re-simulated \
+              bit for bit; bodies as segments from their parent's centre, to scale.</p>\n";
+        for (file, caption) in replays {
+            let _ = writeln!(
+                h,
+                "<figure><img class=\"replay\" src=\"{f}\" alt=\"{c}\"><figcaption>{c}</figcaption></figure>",
+                f = escape(file),
+                c = escape(caption)
+            );
+        }
+    }
+    h += "<h2>Figures</h2>\n";
     for (file, caption) in figures {
         let _ = writeln!(
             h,
@@ -549,4 +575,35 @@ fn index_html(
           document.body.dataset.imagesFailed = imgs.length - ok;\
           });</script>\n</body></html>\n";
     h
+}
+
+/// The animated replay of trial seed [`TABLE_SEED`] of one parameter set.
+fn replay_svg(exp: &Experiment, params: &[f64], title: &str) -> Result<String, Failure> {
+    let values = ParamValues::from_named(&exp.full_params(params))
+        .map_err(|e| Failure::Job(anyhow!("{title}: {e}")))?;
+    let model = NaoModel::with_params(exp.robot_type, &values)
+        .map_err(|e| Failure::Job(anyhow!("{title}: {e}")))?;
+    let mut frames = render::Frames::new();
+    let mut cycle = 0;
+    trial::run_observed(
+        exp.robot_type,
+        &values,
+        TABLE_SEED,
+        exp.trial_duration_s,
+        SimSettings::with_physics(&exp.physics),
+        trial::Engine::of(exp.walk),
+        &mut |sim, _| {
+            if cycle % render::EVERY == 0 {
+                frames.push(
+                    sim.body_poses()
+                        .iter()
+                        .map(|p| [p[0], p[1], p[2]])
+                        .collect(),
+                );
+            }
+            cycle += 1;
+        },
+    )
+    .map_err(|e| Failure::Job(anyhow!("{title}'s replay: {e}")))?;
+    Ok(render::animated_svg(&model, &frames, title))
 }
