@@ -140,9 +140,11 @@ pub enum Command {
     },
     /// What a run found: figures (SVG), Table IV (Markdown, JSON) and an index.html.
     Report {
-        /// The run directory (only read; a running run is read as it stands).
-        dir: PathBuf,
-        /// Where to write (default: DIR/report).
+        /// The run directories (only read; a running run is read as it stands); with
+        /// several, each gets its report and one page puts them side by side.
+        #[arg(required = true)]
+        dirs: Vec<PathBuf>,
+        /// Where to write (default with one run: DIR/report; required with several).
         #[arg(long)]
         out: Option<PathBuf>,
         /// Trials per Table IV column (Expert, Optim.1, Optim.2), seeds 777, 778, …

@@ -93,12 +93,12 @@ fn dispatch(cli: Cli) -> Result<(), Failure> {
         Command::Clop(a) => commands::clop::clop(&a),
         Command::History { dir, json, csv } => commands::history::history(&dir, json, csv),
         Command::Report {
-            dir,
+            dirs,
             out,
             trials,
             threads,
         } => commands::report::report(
-            &dir,
+            &dirs,
             out.as_deref(),
             trials,
             threads.unwrap_or_else(|| {

@@ -136,6 +136,53 @@ fn report_writes_every_figure_and_table_iv_and_leaves_the_run_as_it_was() {
     assert_eq!(imgs, 5 + 10 + 2, "every figure on the page");
     assert!(page.contains("Optim.1"));
 
+    // Over two runs (seeds 1 and 2): each run's report, and one page with both rows.
+    succeed(
+        naofarm()
+            .args([
+                "run",
+                "--json",
+                "--workers",
+                "2",
+                "--iterations",
+                "24",
+                "--seed",
+                "2",
+            ])
+            .arg(root().join("experiments/synthetic.toml"))
+            .arg("--out")
+            .arg(dir.join("run2")),
+    );
+    let both = dir.join("both");
+    succeed(
+        naofarm()
+            .arg("report")
+            .arg(dir.join("run"))
+            .arg(dir.join("run2"))
+            .arg("--out")
+            .arg(&both)
+            .args(["--trials", "4"]),
+    );
+    let page = std::fs::read_to_string(both.join("index.html")).unwrap();
+    for (k, seed) in [(0, 1), (1, 2)] {
+        assert!(both.join(format!("{k}-synthetic/table4.json")).exists());
+        assert!(
+            page.contains(&format!(
+                "<tr><td><a href=\"{k}-synthetic/index.html\">{k}</a></td><td>synthetic</td><td>{seed}</td>"
+            )),
+            "run {k} on the page: {page}"
+        );
+    }
+    circles(&both.join("best.svg"));
+    let e = fails(
+        naofarm()
+            .arg("report")
+            .arg(dir.join("run"))
+            .arg(dir.join("run2")),
+        2,
+    );
+    assert!(e.contains("--out"), "{e}");
+
     // Bad input: no run there, no trials.
     let e = fails(naofarm().arg("report").arg(dir.join("nowhere")), 2);
     assert!(e.contains("journal"), "{e}");

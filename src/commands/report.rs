@@ -5,7 +5,7 @@
 //! and an `index.html` that shows it all. Only reads the run directory.
 
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::anyhow;
 use coordinator::evolve::DecidedIteration;
@@ -31,13 +31,62 @@ struct Row {
     stats: Stats,
 }
 
-/// Writes the report of the run in `dir` into `out` (default `DIR/report`).
-pub fn report(dir: &Path, out: Option<&Path>, trials: u32, threads: usize) -> Result<(), Failure> {
+/// What one run's report found, for the page over several runs.
+struct Found {
+    view: coordinator::run::RunView,
+    rows: Vec<Row>,
+    page: PathBuf,
+}
+
+/// Writes the report of each run in `dirs`: of one run into `out` (default
+/// `DIR/report`); of several, each into `out/K-NAME/` and a page over all of
+/// them into `out` (then required).
+pub fn report(
+    dirs: &[PathBuf],
+    out: Option<&Path>,
+    trials: u32,
+    threads: usize,
+) -> Result<(), Failure> {
     if trials == 0 || trials > 100_000 {
         return Err(Failure::Usage(anyhow!(
             "--trials {trials}: give 1 to 100000 trials per Table IV row"
         )));
     }
+    match (dirs, out) {
+        ([], _) => Err(Failure::Usage(anyhow!("give at least one run directory"))),
+        ([dir], out) => one(dir, out, trials, threads).map(|_| ()),
+        (_, None) => Err(Failure::Usage(anyhow!(
+            "a report over {} runs needs --out DIR",
+            dirs.len()
+        ))),
+        (_, Some(out)) => {
+            let mut found = Vec::new();
+            for (k, dir) in dirs.iter().enumerate() {
+                let name = read_run(dir)
+                    .map(|v| v.experiment.name)
+                    .unwrap_or_else(|_| "run".into());
+                found.push(one(
+                    dir,
+                    Some(&out.join(format!("{k}-{name}"))),
+                    trials,
+                    threads,
+                )?);
+            }
+            std::fs::write(
+                out.join("best.svg"),
+                best_figure(&found).map_err(Failure::Job)?,
+            )
+            .map_err(|e| Failure::Job(anyhow!("{}: {e}", out.display())))?;
+            std::fs::write(out.join("index.html"), runs_html(&found, out, trials))
+                .map_err(|e| Failure::Job(anyhow!("{}: {e}", out.display())))?;
+            outln!("report over {} runs in {}", found.len(), out.display());
+            Ok(())
+        }
+    }
+}
+
+/// Writes the report of the run in `dir` into `out` (default `DIR/report`).
+fn one(dir: &Path, out: Option<&Path>, trials: u32, threads: usize) -> Result<Found, Failure> {
     let view = read_run(dir).map_err(|e| match e {
         coordinator::run::RunError::Journal(coordinator::journal::JournalError::Io { .. }) => {
             Failure::Usage(e.into())
@@ -95,7 +144,11 @@ pub fn report(dir: &Path, out: Option<&Path>, trials: u32, threads: usize) -> Re
     )?;
     outln!("report of {} in {}", dir.display(), out.display());
     outln!("{md}");
-    Ok(())
+    Ok(Found {
+        view,
+        rows,
+        page: out.join("index.html"),
+    })
 }
 
 /// The colour and fill of a decision's points: ACCEPT white with a dark
@@ -606,4 +659,142 @@ fn replay_svg(exp: &Experiment, params: &[f64], title: &str) -> Result<String, F
     )
     .map_err(|e| Failure::Job(anyhow!("{title}'s replay: {e}")))?;
     Ok(render::animated_svg(&model, &frames, title))
+}
+
+/// ν′'s mx over the iterations, one line per run.
+fn best_figure(found: &[Found]) -> anyhow::Result<String> {
+    let n = found
+        .iter()
+        .filter_map(|f| f.view.decided.last().map(|d| d.iteration + 1))
+        .max()
+        .unwrap_or(1) as f64;
+    let top = found
+        .iter()
+        .flat_map(|f| f.view.decided.iter())
+        .filter_map(|d| d.best.as_ref().and_then(|b| b.stats.mx))
+        .fold(1.0f64, f64::max)
+        * 1.1;
+    svg(|root| {
+        let mut chart = ChartBuilder::on(root)
+            .caption("ν′'s mx over the iterations", ("sans-serif", 18))
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(50)
+            .build_cartesian_2d(0.0..n, 0.0..top)
+            .map_err(e)?;
+        chart
+            .configure_mesh()
+            .x_desc("iteration")
+            .y_desc("m")
+            .draw()
+            .map_err(e)?;
+        for (k, f) in found.iter().enumerate() {
+            let colour = Palette99::pick(k).to_rgba();
+            let label = format!(
+                "{k}: {} seed {}",
+                f.view.experiment.name, f.view.experiment.seed
+            );
+            chart
+                .draw_series(LineSeries::new(
+                    f.view.decided.iter().filter_map(|d| {
+                        d.best
+                            .as_ref()
+                            .and_then(|b| b.stats.mx)
+                            .map(|mx| (d.iteration as f64, mx))
+                    }),
+                    colour.stroke_width(2),
+                ))
+                .map_err(e)?
+                .label(label)
+                .legend(move |(x, y)| {
+                    PathElement::new([(x, y), (x + 16, y)], colour.stroke_width(2))
+                });
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(e)?;
+        Ok(())
+    })
+}
+
+/// The page over several runs: each run's facts, Table IV row, converged
+/// parameters (CLOP's mean, and the spread of the last 100 samples).
+fn runs_html(found: &[Found], out: &Path, trials: u32) -> String {
+    let mut h = String::from(
+        "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
+         <title>naofarm report over runs</title><style>body{font-family:sans-serif;\
+         max-width:1500px;margin:1em auto}table{border-collapse:collapse}td,th{border:1px \
+         solid #aaa;padding:2px 8px;text-align:right}</style></head><body>\n\
+         <h1>Runs side by side</h1>\n<img src=\"best.svg\" alt=\"best mx over iterations\">\n",
+    );
+    let _ = writeln!(
+        h,
+        "<h2>Table IV rows</h2><p>{trials} trials per column from seed {TABLE_SEED}.</p>\
+         <table><tr><th>run</th><th>experiment</th><th>seed</th><th>type</th><th>walk</th>\
+         <th>decided</th><th>Expert s / mx</th><th>Optim.1 s / mx</th><th>Optim.2 s / mx</th>\
+         <th>Optim.1 / Expert</th><th>Optim.2 / Expert</th></tr>"
+    );
+    for (k, f) in found.iter().enumerate() {
+        let exp = &f.view.experiment;
+        let col = |name: &str| f.rows.iter().find(|r| r.name == name);
+        let sm = |name: &str| {
+            col(name).map_or("–".into(), |r| {
+                format!("{:.2} / {}", r.stats.s, cell(r.stats.mx))
+            })
+        };
+        let ratio = |name: &str| match (
+            col(name).and_then(|r| r.stats.mx),
+            col("Expert").and_then(|r| r.stats.mx),
+        ) {
+            (Some(a), Some(b)) if b > 0.0 => format!("{:.2}×", a / b),
+            _ => "–".into(),
+        };
+        let link = f.page.strip_prefix(out).map_or_else(
+            |_| f.page.display().to_string(),
+            |p| p.display().to_string(),
+        );
+        let _ = writeln!(
+            h,
+            "<tr><td><a href=\"{link}\">{k}</a></td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>\
+             <td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            escape(&exp.name),
+            exp.seed,
+            exp.robot_type,
+            exp.walk.name(),
+            f.view.decided.len(),
+            sm("Expert"),
+            sm("Optim.1"),
+            sm("Optim.2"),
+            ratio("Optim.1"),
+            ratio("Optim.2"),
+        );
+    }
+    h += "</table>\n<h2>Converged parameters</h2><p>CLOP's mean (Optim.2) ± the standard \
+          deviation of the last 100 iterations' samples.</p><table><tr><th>run</th><th>parameter</th>\
+          <th>Optim.2</th><th>sd (last 100)</th></tr>\n";
+    for (k, f) in found.iter().enumerate() {
+        let tail: Vec<&DecidedIteration> = f.view.decided.iter().rev().take(100).collect();
+        for (i, p) in f.view.experiment.parameter.iter().enumerate() {
+            let v: Vec<f64> = tail.iter().map(|d| d.params[i]).collect();
+            let n = v.len() as f64;
+            let mean = v.iter().sum::<f64>() / n.max(1.0);
+            let sd =
+                (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0)).sqrt();
+            let o2 = f
+                .rows
+                .iter()
+                .find(|r| r.name == "Optim.2")
+                .map_or("–".into(), |r| format!("{:.4}", r.params[i]));
+            let _ = writeln!(
+                h,
+                "<tr><td>{k}</td><td>{}</td><td>{o2}</td><td>{sd:.4}</td></tr>",
+                escape(&p.name)
+            );
+        }
+    }
+    h += "</table>\n</body></html>\n";
+    h
 }
