@@ -425,6 +425,10 @@ pub struct TrialArgs {
     /// every body's pose each 20 ms cycle, as JSON lines, for a replay.
     #[arg(long, value_name = "FILE")]
     pub record: Option<std::path::PathBuf>,
+    /// Render the first trial (as --record chooses it) as an animated SVG:
+    /// side and top view of the robot's bodies, to scale.
+    #[arg(long, value_name = "FILE.svg")]
+    pub render: Option<std::path::PathBuf>,
     /// Replay a farm trial of this run directory (with --iteration and
     /// --trial): its parameters, robot type, physics and seed come from the
     /// journal, and the result is compared with the journaled one bit for bit.

@@ -5,7 +5,7 @@
 
 use std::fmt::Write as _;
 
-use worker::nao::model::NaoModel;
+use worker::nao::{model::NaoModel, replay::Replayed, trial};
 
 /// Pixels per metre.
 const SCALE: f64 = 180.0;
@@ -105,4 +105,31 @@ pub fn animated_svg(model: &NaoModel, frames: &Frames, title: &str) -> String {
     }
     s += "</svg>\n";
     s
+}
+
+/// Re-simulates the trial `what` and returns its animated SVG.
+pub fn trial_svg(what: &Replayed<'_>, title: &str) -> anyhow::Result<String> {
+    let model = NaoModel::with_params(what.robot_type, what.values)?;
+    let mut frames = Frames::new();
+    let mut cycle = 0;
+    trial::run_observed(
+        what.robot_type,
+        what.values,
+        what.seed,
+        what.duration_s,
+        what.settings,
+        what.engine,
+        &mut |sim, _| {
+            if cycle % EVERY == 0 {
+                frames.push(
+                    sim.body_poses()
+                        .iter()
+                        .map(|p| [p[0], p[1], p[2]])
+                        .collect(),
+                );
+            }
+            cycle += 1;
+        },
+    )?;
+    Ok(animated_svg(&model, &frames, title))
 }

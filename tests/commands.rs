@@ -471,6 +471,25 @@ fn trial_records_a_replay_of_its_first_trial() {
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
+
+    // --render: the same trial as an animated SVG, 2 s at 12.5 frames/s.
+    let svg = scratch("render").join("walk.svg");
+    succeed(
+        naofarm()
+            .args(["trial", "--trials", "1", "--duration", "2", "--seed", "4"])
+            .arg("--render")
+            .arg(&svg),
+    );
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert!(text.starts_with("<svg"), "{}", &text[..text.len().min(200)]);
+    let frames = text
+        .split("values=\"")
+        .nth(1)
+        .and_then(|v| v.split('"').next())
+        .map(|v| v.split(';').count());
+    assert_eq!(frames, Some(25));
+    // A segment per body but the torso, in two views, each with 4 moving ends.
+    assert_eq!(text.matches("<animate ").count(), 22 * 2 * 4);
 }
 
 #[test]

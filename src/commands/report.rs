@@ -14,7 +14,7 @@ use plotters::prelude::*;
 use protocol::{
     params::ParamValues, pickout::stats, Decision, Experiment, Stats, TrialModel, TrialRequest,
 };
-use worker::nao::{model::NaoModel, sim::SimSettings, trial};
+use worker::nao::{sim::SimSettings, trial};
 
 use crate::common::{note_tail, Failure};
 use crate::render;
@@ -632,33 +632,19 @@ fn index_html(
 
 /// The animated replay of trial seed [`TABLE_SEED`] of one parameter set.
 fn replay_svg(exp: &Experiment, params: &[f64], title: &str) -> Result<String, Failure> {
-    let values = ParamValues::from_named(&exp.full_params(params))
-        .map_err(|e| Failure::Job(anyhow!("{title}: {e}")))?;
-    let model = NaoModel::with_params(exp.robot_type, &values)
-        .map_err(|e| Failure::Job(anyhow!("{title}: {e}")))?;
-    let mut frames = render::Frames::new();
-    let mut cycle = 0;
-    trial::run_observed(
-        exp.robot_type,
-        &values,
-        TABLE_SEED,
-        exp.trial_duration_s,
-        SimSettings::with_physics(&exp.physics),
-        trial::Engine::of(exp.walk),
-        &mut |sim, _| {
-            if cycle % render::EVERY == 0 {
-                frames.push(
-                    sim.body_poses()
-                        .iter()
-                        .map(|p| [p[0], p[1], p[2]])
-                        .collect(),
-                );
-            }
-            cycle += 1;
-        },
-    )
-    .map_err(|e| Failure::Job(anyhow!("{title}'s replay: {e}")))?;
-    Ok(render::animated_svg(&model, &frames, title))
+    let named = exp.full_params(params);
+    let values =
+        ParamValues::from_named(&named).map_err(|e| Failure::Job(anyhow!("{title}: {e}")))?;
+    let what = worker::nao::replay::Replayed {
+        robot_type: exp.robot_type,
+        seed: TABLE_SEED,
+        duration_s: exp.trial_duration_s,
+        params: &named,
+        values: &values,
+        settings: SimSettings::with_physics(&exp.physics),
+        engine: trial::Engine::of(exp.walk),
+    };
+    render::trial_svg(&what, title).map_err(|e| Failure::Job(anyhow!("{title}'s replay: {e}")))
 }
 
 /// ν′'s mx over the iterations, one line per run.

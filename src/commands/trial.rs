@@ -77,6 +77,18 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         };
         record(path, &what)?;
     }
+    if let Some(path) = &a.render {
+        let what = Replayed {
+            robot_type: a.robot_type,
+            seed: a.seed,
+            duration_s: a.duration,
+            params: &params,
+            values: &values,
+            settings,
+            engine,
+        };
+        render(path, &what, &format!("seed {}", a.seed))?;
+    }
     let t0 = Instant::now();
     let runs = trial::run_many(
         a.robot_type,
@@ -167,10 +179,10 @@ fn replay(a: &TrialArgs, dir: &std::path::Path, iteration: u64, k: u32) -> Resul
     })?;
     let req = &ft.request;
     let values = ParamValues::from_named(&req.params).map_err(|e| Failure::Job(e.into()))?;
-    if let Some(path) = &a.record {
+    if a.record.is_some() || a.render.is_some() {
         if req.model != protocol::TrialModel::Nao {
             return Err(Failure::Usage(anyhow!(
-                "--record: the run's model is {:?}; only NAO trials have poses",
+                "--record/--render: the run's model is {:?}; only NAO trials have poses",
                 req.model
             )));
         }
@@ -183,7 +195,16 @@ fn replay(a: &TrialArgs, dir: &std::path::Path, iteration: u64, k: u32) -> Resul
             settings: SimSettings::with_physics(&req.physics),
             engine: trial::Engine::of(req.walk),
         };
-        record(path, &what)?;
+        if let Some(path) = &a.record {
+            record(path, &what)?;
+        }
+        if let Some(path) = &a.render {
+            render(
+                path,
+                &what,
+                &format!("iteration {iteration}, trial {k} (seed {})", req.seed),
+            )?;
+        }
     }
     let m = worker::run_trial(req).map_err(|e| Failure::Job(e.into()))?;
     let same = ft.journaled.as_ref().map(|(j, _)| same_bits(j, &m));
@@ -279,5 +300,15 @@ fn record(path: &std::path::Path, what: &Replayed<'_>) -> Result<(), Failure> {
         if t.measurement.fell { ", fell" } else { "" },
         path.display()
     );
+    Ok(())
+}
+
+/// Writes the animated SVG of one trial.
+fn render(path: &std::path::Path, what: &Replayed<'_>, title: &str) -> Result<(), Failure> {
+    let svg = crate::render::trial_svg(what, title)
+        .map_err(|e| Failure::Job(anyhow!("--render {}: {e}", path.display())))?;
+    std::fs::write(path, svg)
+        .map_err(|e| Failure::Usage(anyhow!("--render {}: {e}", path.display())))?;
+    eprintln!("rendered seed {} to {}", what.seed, path.display());
     Ok(())
 }
