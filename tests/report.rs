@@ -96,7 +96,7 @@ fn report_writes_every_figure_and_table_iv_and_leaves_the_run_as_it_was() {
     for e in std::fs::read_dir(&out).unwrap() {
         let p = e.unwrap().path();
         let f = p.file_name().unwrap().to_string_lossy().to_string();
-        if f.starts_with("pair-") {
+        if f.starts_with("pair-") && f.ends_with(".svg") {
             assert_eq!(circles(&p), 24, "{f}");
             pairs += 1;
         }
@@ -104,6 +104,18 @@ fn report_writes_every_figure_and_table_iv_and_leaves_the_run_as_it_was() {
     assert_eq!(pairs, 10, "each pair of five parameters");
     assert_eq!(circles(&out.join("progress.svg")), 24);
     circles(&out.join("decisions.svg"));
+    // Every figure also as a PNG of the SVG's size, not blank.
+    let mut pngs = 0;
+    for e in std::fs::read_dir(&out).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().is_some_and(|x| x == "png") {
+            let (w, h, differing) = png_stats(&p);
+            assert_eq!((w, h), (720, 360), "{}", p.display());
+            assert!(differing > 1000, "{} is blank", p.display());
+            pngs += 1;
+        }
+    }
+    assert_eq!(pngs, 5 + 10 + 2);
 
     // Table IV: Expert, Optim.1 (ν′, the row `history` flags) and Optim.2
     // (CLOP's mean, as the run's finished line gave it), 8 trials each.
@@ -254,17 +266,24 @@ fn the_report_page_loads_in_a_real_browser_with_every_image() {
         &format!("--screenshot={}", shot.display()),
         "--window-size=1400,1200",
     ]);
-    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&shot).unwrap()));
+    let (w, h, differing) = png_stats(&shot);
+    assert!(
+        differing > (w * h) as usize / 200,
+        "the screenshot is blank"
+    );
+}
+
+/// A PNG's width, height and how many pixels differ from the first one.
+fn png_stats(path: &Path) -> (u32, u32, usize) {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
     let mut reader = decoder.read_info().unwrap();
     let mut buf = vec![0; reader.output_buffer_size().unwrap()];
     let info = reader.next_frame(&mut buf).unwrap();
     let px = &buf[..info.buffer_size()];
-    let first = &px[..4];
-    let differing = px
-        .chunks(info.color_type.samples())
-        .filter(|p| p[..3] != first[..3])
-        .count();
-    assert!(differing > px.len() / 200, "the screenshot is blank");
+    let n = info.color_type.samples();
+    let first = &px[..n.min(3)];
+    let differing = px.chunks(n).filter(|p| &p[..n.min(3)] != first).count();
+    (info.width, info.height, differing)
 }
 
 #[test]

@@ -103,24 +103,33 @@ fn one(dir: &Path, out: Option<&Path>, trials: u32, threads: usize) -> Result<Fo
         std::fs::write(out.join(name), text)
             .map_err(|e| Failure::Job(anyhow!("{}: {e}", out.join(name).display())))
     };
+    let fonts = png_fonts();
+    // A figure as SVG and, beside it, as PNG.
+    let figure = |name: &str, text: &str| {
+        write(name, text)?;
+        let png = name.replace(".svg", ".png");
+        let bytes = to_png(text, &fonts).map_err(|e| Failure::Job(anyhow!("{png}: {e}")))?;
+        std::fs::write(out.join(&png), bytes)
+            .map_err(|e| Failure::Job(anyhow!("{}: {e}", out.join(&png).display())))
+    };
     let job = |e: anyhow::Error| Failure::Job(e);
     let mut figures = Vec::new();
     for (i, p) in exp.parameter.iter().enumerate() {
         let name = format!("param-{}.svg", p.name);
-        write(&name, &parameter_figure(&exp, decided, i).map_err(job)?)?;
+        figure(&name, &parameter_figure(&exp, decided, i).map_err(job)?)?;
         figures.push((name, format!("{} against the iteration", p.name)));
     }
     for i in 0..exp.parameter.len() {
         for j in i + 1..exp.parameter.len() {
             let (a, b) = (&exp.parameter[i].name, &exp.parameter[j].name);
             let name = format!("pair-{a}-{b}.svg");
-            write(&name, &pair_figure(&exp, decided, i, j).map_err(job)?)?;
+            figure(&name, &pair_figure(&exp, decided, i, j).map_err(job)?)?;
             figures.push((name, format!("{b} against {a}")));
         }
     }
-    write("decisions.svg", &decisions_figure(decided).map_err(job)?)?;
+    figure("decisions.svg", &decisions_figure(decided).map_err(job)?)?;
     figures.push(("decisions.svg".into(), "decisions per 50 iterations".into()));
-    write("progress.svg", &progress_figure(decided).map_err(job)?)?;
+    figure("progress.svg", &progress_figure(decided).map_err(job)?)?;
     figures.push((
         "progress.svg".into(),
         "s and mx of every iteration, ν′'s mx".into(),
@@ -783,4 +792,41 @@ fn runs_html(found: &[Found], out: &Path, trials: u32) -> String {
     }
     h += "</table>\n</body></html>\n";
     h
+}
+
+/// The system's fonts for the PNGs, with a sans-serif family that exists
+/// here as the figures' `sans-serif` (without one, the PNGs have no text and
+/// a note says so; the SVGs always do).
+fn png_fonts() -> resvg::usvg::Options<'static> {
+    let mut opt = resvg::usvg::Options::default();
+    let db = opt.fontdb_mut();
+    db.load_system_fonts();
+    let family = [
+        "DejaVu Sans",
+        "Liberation Sans",
+        "Noto Sans",
+        "FreeSans",
+        "Arial",
+    ]
+    .into_iter()
+    .find(|f| db.faces().any(|x| x.families.iter().any(|(n, _)| n == f)));
+    match family {
+        Some(f) => db.set_sans_serif_family(f),
+        None => eprintln!("note: no sans-serif font found; the PNG figures have no text"),
+    }
+    opt
+}
+
+/// One SVG figure rasterised.
+fn to_png(svg: &str, opt: &resvg::usvg::Options<'_>) -> anyhow::Result<Vec<u8>> {
+    let tree = resvg::usvg::Tree::from_str(svg, opt)?;
+    let size = tree.size().to_int_size();
+    let mut pixmap = resvg::tiny_skia::Pixmap::new(size.width(), size.height())
+        .ok_or_else(|| anyhow!("an empty figure"))?;
+    resvg::render(
+        &tree,
+        resvg::tiny_skia::Transform::default(),
+        &mut pixmap.as_mut(),
+    );
+    Ok(pixmap.encode_png()?)
 }
