@@ -316,6 +316,35 @@ fn decisions_figure(decided: &[DecidedIteration]) -> anyhow::Result<String> {
     })
 }
 
+type Chart<'a, 'b> = ChartContext<
+    'a,
+    SVGBackend<'b>,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+
+/// Metres (0..top) against the iteration (0..n), with its mesh.
+fn metres_chart<'a, 'b>(
+    root: &'a DrawingArea<SVGBackend<'b>, plotters::coord::Shift>,
+    caption: &str,
+    n: f64,
+    top: f64,
+) -> anyhow::Result<Chart<'a, 'b>> {
+    let mut chart = ChartBuilder::on(root)
+        .caption(caption, ("sans-serif", 18))
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(50)
+        .build_cartesian_2d(0.0..n, 0.0..top)
+        .map_err(e)?;
+    chart
+        .configure_mesh()
+        .x_desc("iteration")
+        .y_desc("m")
+        .draw()
+        .map_err(e)?;
+    Ok(chart)
+}
+
 /// mx of every iteration (points by decision; a fallen-only iteration at 0),
 /// s (green line, right scale ×5 m) and ν′'s mx (blue line).
 fn progress_figure(decided: &[DecidedIteration]) -> anyhow::Result<String> {
@@ -326,22 +355,7 @@ fn progress_figure(decided: &[DecidedIteration]) -> anyhow::Result<String> {
         .fold(1.0f64, f64::max)
         * 1.1;
     svg(|root| {
-        let mut chart = ChartBuilder::on(root)
-            .caption(
-                "mx (points), s × max (green), ν′'s mx (blue)",
-                ("sans-serif", 18),
-            )
-            .margin(10)
-            .x_label_area_size(35)
-            .y_label_area_size(50)
-            .build_cartesian_2d(0.0..n, 0.0..top)
-            .map_err(e)?;
-        chart
-            .configure_mesh()
-            .x_desc("iteration")
-            .y_desc("m")
-            .draw()
-            .map_err(e)?;
+        let mut chart = metres_chart(root, "mx (points), s × max (green), ν′'s mx (blue)", n, top)?;
         chart
             .draw_series(LineSeries::new(
                 decided
@@ -670,19 +684,7 @@ fn best_figure(found: &[Found]) -> anyhow::Result<String> {
         .fold(1.0f64, f64::max)
         * 1.1;
     svg(|root| {
-        let mut chart = ChartBuilder::on(root)
-            .caption("ν′'s mx over the iterations", ("sans-serif", 18))
-            .margin(10)
-            .x_label_area_size(35)
-            .y_label_area_size(50)
-            .build_cartesian_2d(0.0..n, 0.0..top)
-            .map_err(e)?;
-        chart
-            .configure_mesh()
-            .x_desc("iteration")
-            .y_desc("m")
-            .draw()
-            .map_err(e)?;
+        let mut chart = metres_chart(root, "ν′'s mx over the iterations", n, top)?;
         for (k, f) in found.iter().enumerate() {
             let colour = Palette99::pick(k).to_rgba();
             let label = format!(

@@ -65,29 +65,20 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             .with(k, v)
             .map_err(|m| Failure::Usage(anyhow!("--engine {m}")))?;
     }
+    let first = Replayed {
+        robot_type: a.robot_type,
+        seed: a.seed,
+        duration_s: a.duration,
+        params: &params,
+        values: &values,
+        settings,
+        engine,
+    };
     if let Some(path) = &a.record {
-        let what = Replayed {
-            robot_type: a.robot_type,
-            seed: a.seed,
-            duration_s: a.duration,
-            params: &params,
-            values: &values,
-            settings,
-            engine,
-        };
-        record(path, &what)?;
+        record(path, &first)?;
     }
     if let Some(path) = &a.render {
-        let what = Replayed {
-            robot_type: a.robot_type,
-            seed: a.seed,
-            duration_s: a.duration,
-            params: &params,
-            values: &values,
-            settings,
-            engine,
-        };
-        render(path, &what, &format!("seed {}", a.seed))?;
+        render(path, &first, &format!("seed {}", a.seed))?;
     }
     let t0 = Instant::now();
     let runs = trial::run_many(

@@ -417,33 +417,18 @@ mod tests {
 
     #[test]
     fn same_seed_same_bits_other_seed_other_numbers() {
-        let a = run(
-            0,
-            &ParamValues::default(),
-            11,
-            3.0,
-            SimSettings::default(),
-            OPEN,
-        )
-        .unwrap();
-        let b = run(
-            0,
-            &ParamValues::default(),
-            11,
-            3.0,
-            SimSettings::default(),
-            OPEN,
-        )
-        .unwrap();
-        let c = run(
-            0,
-            &ParamValues::default(),
-            12,
-            3.0,
-            SimSettings::default(),
-            OPEN,
-        )
-        .unwrap();
+        let at = |seed| {
+            run(
+                0,
+                &ParamValues::default(),
+                seed,
+                3.0,
+                SimSettings::default(),
+                OPEN,
+            )
+            .unwrap()
+        };
+        let (a, b, c) = (at(11), at(11), at(12));
         assert_eq!(a.measurement.x_m.to_bits(), b.measurement.x_m.to_bits());
         assert_eq!(a.measurement.y_m.to_bits(), b.measurement.y_m.to_bits());
         assert_ne!(a.measurement.x_m.to_bits(), c.measurement.x_m.to_bits());
