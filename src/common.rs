@@ -85,3 +85,14 @@ pub fn note_tail(dir: &Path, view: &coordinator::run::RunView) {
         );
     }
 }
+
+/// Reads the run in `dir` for a command that only reads it: a journal that
+/// cannot be opened is a usage error (exit 2), a damaged one a failed job.
+pub fn read_run(dir: &Path) -> Result<coordinator::run::RunView, Failure> {
+    coordinator::run::read_run(dir).map_err(|e| match e {
+        coordinator::run::RunError::Journal(coordinator::journal::JournalError::Io { .. }) => {
+            Failure::Usage(e.into())
+        }
+        e => Failure::Job(e.into()),
+    })
+}

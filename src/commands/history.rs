@@ -3,7 +3,7 @@
 use std::path::Path;
 
 use anyhow::anyhow;
-use coordinator::{evolve::DecidedIteration, run::read_run};
+use coordinator::evolve::DecidedIteration;
 
 use crate::common::{emit, Failure};
 
@@ -16,12 +16,7 @@ pub fn history(dir: &Path, json: bool, csv: bool) -> Result<(), Failure> {
     if json && csv {
         return Err(Failure::Usage(anyhow!("choose one of --json and --csv")));
     }
-    let view = read_run(dir).map_err(|e| match e {
-        coordinator::run::RunError::Journal(coordinator::journal::JournalError::Io { .. }) => {
-            Failure::Usage(e.into())
-        }
-        e => Failure::Job(e.into()),
-    })?;
+    let view = crate::common::read_run(dir)?;
     crate::common::note_tail(dir, &view);
     let (exp, decided) = (view.experiment, view.decided);
     let names: Vec<&str> = exp.parameter.iter().map(|p| p.name.as_str()).collect();

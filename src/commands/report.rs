@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::anyhow;
 use coordinator::evolve::DecidedIteration;
-use coordinator::run::{read_run, replay};
+use coordinator::run::replay;
 use plotters::prelude::*;
 use protocol::{
     params::ParamValues, pickout::stats, Decision, Experiment, Stats, TrialModel, TrialRequest,
@@ -54,7 +54,7 @@ pub fn report(
     }
     match (dirs, out) {
         ([], _) => Err(Failure::Usage(anyhow!("give at least one run directory"))),
-        ([dir], out) => one(dir, out, trials, threads).map(|_| ()),
+        ([dir], out) => one(dir, read(dir)?, out, trials, threads).map(|_| ()),
         (_, None) => Err(Failure::Usage(anyhow!(
             "a report over {} runs needs --out DIR",
             dirs.len()
@@ -62,15 +62,9 @@ pub fn report(
         (_, Some(out)) => {
             let mut found = Vec::new();
             for (k, dir) in dirs.iter().enumerate() {
-                let name = read_run(dir)
-                    .map(|v| v.experiment.name)
-                    .unwrap_or_else(|_| "run".into());
-                found.push(one(
-                    dir,
-                    Some(&out.join(format!("{k}-{name}"))),
-                    trials,
-                    threads,
-                )?);
+                let view = read(dir)?;
+                let sub = out.join(format!("{k}-{}", view.experiment.name));
+                found.push(one(dir, view, Some(&sub), trials, threads)?);
             }
             std::fs::write(
                 out.join("best.svg"),
@@ -85,15 +79,21 @@ pub fn report(
     }
 }
 
-/// Writes the report of the run in `dir` into `out` (default `DIR/report`).
-fn one(dir: &Path, out: Option<&Path>, trials: u32, threads: usize) -> Result<Found, Failure> {
-    let view = read_run(dir).map_err(|e| match e {
-        coordinator::run::RunError::Journal(coordinator::journal::JournalError::Io { .. }) => {
-            Failure::Usage(e.into())
-        }
-        e => Failure::Job(e.into()),
-    })?;
+/// Reads a run for its report (noting a torn tail).
+fn read(dir: &Path) -> Result<coordinator::run::RunView, Failure> {
+    let view = crate::common::read_run(dir)?;
     note_tail(dir, &view);
+    Ok(view)
+}
+
+/// Writes the report of the run in `dir` (read as `view`) into `out` (default `DIR/report`).
+fn one(
+    dir: &Path,
+    view: coordinator::run::RunView,
+    out: Option<&Path>,
+    trials: u32,
+    threads: usize,
+) -> Result<Found, Failure> {
     let exp = view.experiment.clone();
     let decided = &view.decided;
     let out = out.map_or_else(|| dir.join("report"), Path::to_path_buf);
@@ -448,41 +448,13 @@ fn run_trials(
         physics: exp.physics,
         walk: exp.walk,
     };
-    let next = std::sync::atomic::AtomicU32::new(0);
-    let mut done: Vec<(u32, Result<protocol::measurement::Measurement, String>)> =
-        std::thread::scope(|s| {
-            let handles: Vec<_> = (0..threads.clamp(1, 64))
-                .map(|_| {
-                    s.spawn(|| {
-                        let mut mine = Vec::new();
-                        loop {
-                            let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                            if k >= trials {
-                                break mine;
-                            }
-                            mine.push((
-                                k,
-                                worker::run_trial(&request(k)).map_err(|e| e.to_string()),
-                            ));
-                        }
-                    })
-                })
-                .collect();
-            handles
-                .into_iter()
-                .flat_map(|h| h.join().unwrap_or_default())
-                .collect()
-        });
-    done.sort_by_key(|(k, _)| *k);
-    if done.len() != trials as usize {
-        return Err(Failure::Job(anyhow!(
-            "{} of {trials} Table IV trials came back",
-            done.len()
-        )));
-    }
-    done.into_iter()
-        .map(|(k, r)| r.map_err(|e| Failure::Job(anyhow!("Table IV trial {k}: {e}"))))
-        .collect()
+    trial::in_parallel(u64::from(trials), threads, |k| {
+        let k = k as u32;
+        worker::run_trial(&request(k)).map_err(|e| Failure::Job(anyhow!("Table IV trial {k}: {e}")))
+    })
+    .map_err(|e| Failure::Job(anyhow!("Table IV trials: {e}")))?
+    .into_iter()
+    .collect()
 }
 
 fn cell(v: Option<f64>) -> String {

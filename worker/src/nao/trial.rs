@@ -292,10 +292,33 @@ pub fn run_many(
     engine: Engine,
 ) -> Result<Vec<NaoTrial>, NaoTrialError> {
     let Batch { seed0, n, threads } = batch;
-    let threads = threads.clamp(1, 64);
+    in_parallel(n, threads, |i| {
+        run(
+            robot_type,
+            params,
+            seed0.wrapping_add(i),
+            duration_s,
+            settings,
+            engine,
+        )
+    })
+    .map_err(NaoTrialError::Panicked)?
+    .into_iter()
+    .collect()
+}
+
+/// `f(0), f(1), …, f(n − 1)` on up to `threads` threads (clamped to 1..=64),
+/// in index order whatever the threads; a panic in `f` is an error with its
+/// message.
+pub fn in_parallel<T: Send>(
+    n: u64,
+    threads: usize,
+    f: impl Fn(u64) -> T + Sync,
+) -> Result<Vec<T>, String> {
     let next = std::sync::atomic::AtomicU64::new(0);
-    let mut out: Vec<Result<NaoTrial, NaoTrialError>> = std::thread::scope(|s| {
-        let handles: Vec<_> = (0..threads)
+    let mut out: Vec<(u64, T)> = Vec::new();
+    std::thread::scope(|s| {
+        let handles: Vec<_> = (0..threads.clamp(1, 64))
             .map(|_| {
                 s.spawn(|| {
                     let mut mine = Vec::new();
@@ -304,40 +327,30 @@ pub fn run_many(
                         if i >= n {
                             break mine;
                         }
-                        let seed = seed0.wrapping_add(i);
-                        mine.push(run(robot_type, params, seed, duration_s, settings, engine));
+                        mine.push((i, f(i)));
                     }
                 })
             })
             .collect();
-        handles
-            .into_iter()
-            .flat_map(|h| match h.join() {
-                Ok(mine) => mine,
-                Err(p) => vec![Err(NaoTrialError::Panicked(
-                    p.downcast_ref::<&str>()
+        for h in handles {
+            match h.join() {
+                Ok(mine) => out.extend(mine),
+                Err(p) => {
+                    return Err(p
+                        .downcast_ref::<&str>()
                         .map(|s| (*s).to_string())
                         .or_else(|| p.downcast_ref::<String>().cloned())
-                        .unwrap_or_else(|| "(no message)".into()),
-                ))],
-            })
-            .collect()
-    });
-    let panicked = out.iter().find_map(|r| match r {
-        Err(e @ NaoTrialError::Panicked(_)) => Some(e.clone()),
-        _ => None,
-    });
-    if let Some(e) = panicked {
-        return Err(e);
-    }
-    out.sort_by_key(|r| r.as_ref().map_or(0, |t| t.seed.wrapping_sub(seed0)));
+                        .unwrap_or_else(|| "(no message)".into()))
+                }
+            }
+        }
+        Ok(())
+    })?;
+    out.sort_by_key(|(i, _)| *i);
     if out.len() as u64 != n {
-        return Err(NaoTrialError::Panicked(format!(
-            "{} of {n} trials came back",
-            out.len()
-        )));
+        return Err(format!("{} of {n} came back", out.len()));
     }
-    out.into_iter().collect()
+    Ok(out.into_iter().map(|(_, t)| t).collect())
 }
 
 #[cfg(test)]
