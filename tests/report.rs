@@ -57,6 +57,13 @@ fn circles(path: &Path) -> usize {
         .count()
 }
 
+fn unix_ms() -> u64 {
+    let d = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap();
+    u64::try_from(d.as_millis()).unwrap()
+}
+
 fn tree_bytes(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
     let mut v: Vec<_> = std::fs::read_dir(dir)
         .unwrap()
@@ -73,7 +80,9 @@ fn tree_bytes(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
 #[test]
 fn report_writes_every_figure_and_table_iv_and_leaves_the_run_as_it_was() {
     let dir = scratch("report");
+    let t0 = unix_ms();
     let finished = synthetic_run(&dir);
+    let t1 = unix_ms();
     let before = tree_bytes(&dir.join("run"));
     let out = report(&dir);
     assert_eq!(tree_bytes(&dir.join("run")), before, "report only reads");
@@ -147,24 +156,35 @@ fn report_writes_every_figure_and_table_iv_and_leaves_the_run_as_it_was() {
     let imgs = page.matches("<img ").count();
     assert_eq!(imgs, 5 + 10 + 2, "every figure on the page");
     assert!(page.contains("Optim.1"));
-
-    // Over two runs (seeds 1 and 2): each run's report, and one page with both rows.
-    succeed(
-        naofarm()
-            .args([
-                "run",
-                "--json",
-                "--workers",
-                "2",
-                "--iterations",
-                "24",
-                "--seed",
-                "2",
-            ])
-            .arg(root().join("experiments/synthetic.toml"))
-            .arg("--out")
-            .arg(dir.join("run2")),
+    // The run's wall time, from the journal's clock marks: inside the span
+    // the test measured around the run, in one session.
+    let wall = coordinator::run::read_run(&dir.join("run"))
+        .unwrap()
+        .wall
+        .expect("clock marks journaled");
+    assert_eq!(wall.sessions, 1);
+    assert!(
+        t0 <= wall.first_ms && wall.last_ms <= t1,
+        "{wall:?} in {t0}..{t1}"
     );
+    assert_eq!(wall.served_ms, wall.last_ms - wall.first_ms);
+    assert!(
+        page.contains("<p class=\"wall\">Wall time ") && page.contains(" over 1 session: started "),
+        "{page}"
+    );
+
+    // Over two runs (seeds 1 and 2): each run's report, and one page with both
+    // rows. The second is made in two sessions (12 iterations, then extended to 24).
+    for iterations in ["12", "24"] {
+        succeed(
+            naofarm()
+                .args(["run", "--json", "--workers", "2", "--seed", "2"])
+                .args(["--iterations", iterations])
+                .arg(root().join("experiments/synthetic.toml"))
+                .arg("--out")
+                .arg(dir.join("run2")),
+        );
+    }
     let both = dir.join("both");
     succeed(
         naofarm()
@@ -186,6 +206,10 @@ fn report_writes_every_figure_and_table_iv_and_leaves_the_run_as_it_was() {
         );
     }
     circles(&both.join("best.svg"));
+    let page2 = std::fs::read_to_string(both.join("1-synthetic/index.html")).unwrap();
+    assert!(page2.contains(" over 2 sessions "), "{page2}");
+    let wall2 = coordinator::run::read_run(&dir.join("run2")).unwrap().wall;
+    assert_eq!(wall2.map(|w| w.sessions), Some(2));
     let e = fails(
         naofarm()
             .arg("report")

@@ -103,6 +103,65 @@ pub enum Record {
         /// Who asked (a free-text label: user and host of `naofarm ctl`, or `--priority`).
         by: String,
     },
+    /// A wall-clock mark, for the run's wall time only (never read by a
+    /// decision): one when a coordinator starts serving the run (`start`),
+    /// and one with every batch of decided iterations (in the same fsync).
+    Clock {
+        /// Milliseconds since the Unix epoch (0 if the clock is before it).
+        unix_ms: u64,
+        /// Whether a serving session starts here.
+        start: bool,
+    },
+}
+
+impl Record {
+    /// A [`Record::Clock`] of now.
+    #[must_use]
+    pub fn clock_now(start: bool) -> Self {
+        let unix_ms = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| u64::try_from(d.as_millis()).unwrap_or(u64::MAX));
+        Self::Clock { unix_ms, start }
+    }
+}
+
+/// A run's wall time, from its [`Record::Clock`] marks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct WallTime {
+    /// Milliseconds served: over each session, from its start to its last mark.
+    pub served_ms: u64,
+    /// Serving sessions (the first and each resume).
+    pub sessions: u32,
+    /// The first session's start (ms since the Unix epoch).
+    pub first_ms: u64,
+    /// The last mark (ms since the Unix epoch).
+    pub last_ms: u64,
+}
+
+impl WallTime {
+    /// The wall time the clock marks in `records` give; `None` when they have
+    /// none (a journal written before naofarm journaled them).
+    #[must_use]
+    pub fn of(records: &[Record]) -> Option<Self> {
+        let mut w: Option<Self> = None;
+        for r in records {
+            let &Record::Clock { unix_ms, start } = r else {
+                continue;
+            };
+            let w = w.get_or_insert(Self {
+                first_ms: unix_ms,
+                ..Self::default()
+            });
+            if start || w.sessions == 0 {
+                w.sessions += 1;
+            } else {
+                // A clock set back mid-session counts nothing rather than wrapping.
+                w.served_ms += unix_ms.saturating_sub(w.last_ms);
+            }
+            w.last_ms = unix_ms;
+        }
+        w
+    }
 }
 
 pub use protocol::wire::Control;

@@ -252,7 +252,10 @@ impl Run {
         };
         let mut journal = Journal::create(dir, &header)?;
         let id = uuid::Uuid::new_v4().to_string();
-        journal.append(&Record::Identity { id: id.clone() })?;
+        journal.append_all(&[
+            &Record::Identity { id: id.clone() },
+            &Record::clock_now(true),
+        ])?;
         let (ev, actions) = Evolve::start(exp, &imported);
         let mut run = Self {
             ev,
@@ -327,7 +330,7 @@ impl Run {
                         why: "a second header".into(),
                     })
                 }
-                Record::Extended { .. } => {}
+                Record::Extended { .. } | Record::Clock { .. } => {}
                 Record::Identity { id: i } => id = id.or(Some(i)),
                 Record::Control { action, .. } => match action {
                     Control::Pause => paused = true,
@@ -388,6 +391,7 @@ impl Run {
                 i
             }
         };
+        run.journal.append(&Record::clock_now(true))?;
         for o in opened_records {
             let same = actions
                 .iter()
@@ -492,6 +496,9 @@ impl Run {
                 }
                 Action::Finished => effects.push(Effect::Finished),
             }
+        }
+        if recs.iter().any(|r| matches!(r, Record::Decided(_))) {
+            recs.push(Record::clock_now(false));
         }
         if !recs.is_empty() {
             self.journal.append_all(&recs.iter().collect::<Vec<_>>())?;
@@ -723,6 +730,8 @@ pub struct RunView {
     pub extensions: Vec<u64>,
     /// The run id (`None`: a journal older than run ids, never resumed since).
     pub id: Option<String>,
+    /// Its wall time (`None`: a journal older than its clock marks).
+    pub wall: Option<crate::journal::WallTime>,
 }
 
 /// Reads the run in `dir`: damage is an error naming its offset; a torn tail is
@@ -795,6 +804,7 @@ fn read_run_records(dir: &Path) -> Result<(RunView, Vec<Record>), RunError> {
         records: records.len(),
         extensions,
         id,
+        wall: crate::journal::WallTime::of(&records),
     };
     Ok((view, records))
 }

@@ -532,6 +532,61 @@ fn escape(s: &str) -> String {
         .replace('"', "&quot;")
 }
 
+/// The run's wall time as the page says it: served time over its sessions,
+/// when it started, and whether it is still being served.
+fn wall_text(view: &coordinator::run::RunView) -> String {
+    let Some(w) = view.wall else {
+        return "Wall time: not journaled (a journal written before naofarm journaled its clock)."
+            .into();
+    };
+    let sessions = match w.sessions {
+        1 => "1 session".to_string(),
+        n => format!("{n} sessions (a resume's downtime not counted)"),
+    };
+    let live = if view.live {
+        "; still being served, so far"
+    } else {
+        ""
+    };
+    format!(
+        "Wall time {} over {sessions}{live}: started {} UTC, last decision {} UTC.",
+        duration_text(w.served_ms),
+        utc_text(w.first_ms),
+        utc_text(w.last_ms)
+    )
+}
+
+/// `1 h 02 min 03 s`, `6 min 11 s`, `4.2 s`.
+fn duration_text(ms: u64) -> String {
+    let s = ms / 1000;
+    match s {
+        0..=59 => format!("{:.1} s", ms as f64 / 1000.0),
+        60..=3599 => format!("{} min {:02} s", s / 60, s % 60),
+        _ => format!("{} h {:02} min {:02} s", s / 3600, s / 60 % 60, s % 60),
+    }
+}
+
+/// `2026-11-23 18:04:05` from milliseconds since the Unix epoch.
+fn utc_text(ms: u64) -> String {
+    let t = i64::try_from(ms / 1000)
+        .ok()
+        .and_then(|s| time::OffsetDateTime::from_unix_timestamp(s).ok());
+    t.map_or_else(
+        || format!("{ms} ms after the epoch"),
+        |t| {
+            format!(
+                "{:04}-{:02}-{:02} {:02}:{:02}:{:02}",
+                t.year(),
+                u8::from(t.month()),
+                t.day(),
+                t.hour(),
+                t.minute(),
+                t.second()
+            )
+        },
+    )
+}
+
 /// One self-contained page: the run's facts, Table IV and every figure.
 fn index_html(
     exp: &Experiment,
@@ -552,7 +607,7 @@ fn index_html(
          figure{{display:inline-block;margin:4px;vertical-align:top}}img{{width:720px;height:360px}}img.replay{{width:auto;height:auto;max-width:1400px}}</style>\
          </head><body>\n<h1>{name}</h1>\n<p>run id {id}, seed {seed}, robot type {ty}, walk {walk}, \
          model {model:?}; {n} of {planned} iterations decided × {tpi} trials of {dur} s: \
-         {a} ACCEPT, {q} EQUIVALENT, {r} REJECT.</p>\n",
+         {a} ACCEPT, {q} EQUIVALENT, {r} REJECT.</p>\n<p class=\"wall\">{wall}</p>\n",
         name = escape(&exp.name),
         id = escape(view.id.as_deref().unwrap_or("–")),
         seed = exp.seed,
@@ -566,6 +621,7 @@ fn index_html(
         a = c(Decision::Accept),
         q = c(Decision::Equivalent),
         r = c(Decision::Reject),
+        wall = escape(&wall_text(view)),
     );
     let _ = write!(
         h,
@@ -703,7 +759,7 @@ fn runs_html(found: &[Found], out: &Path, trials: u32) -> String {
         h,
         "<h2>Table IV rows</h2><p>{trials} trials per column from seed {TABLE_SEED}.</p>\
          <table><tr><th>run</th><th>experiment</th><th>seed</th><th>type</th><th>walk</th>\
-         <th>decided</th><th>Expert s / mx</th><th>Optim.1 s / mx</th><th>Optim.2 s / mx</th>\
+         <th>decided</th><th>wall time</th><th>Expert s / mx</th><th>Optim.1 s / mx</th><th>Optim.2 s / mx</th>\
          <th>Optim.1 / Expert</th><th>Optim.2 / Expert</th></tr>"
     );
     for (k, f) in found.iter().enumerate() {
@@ -728,12 +784,15 @@ fn runs_html(found: &[Found], out: &Path, trials: u32) -> String {
         let _ = writeln!(
             h,
             "<tr><td><a href=\"{link}\">{k}</a></td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>\
-             <td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+             <td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
             escape(&exp.name),
             exp.seed,
             exp.robot_type,
             exp.walk.name(),
             f.view.decided.len(),
+            f.view
+                .wall
+                .map_or_else(|| "–".into(), |w| duration_text(w.served_ms)),
             sm("Expert"),
             sm("Optim.1"),
             sm("Optim.2"),

@@ -353,3 +353,26 @@ proptest! {
         let _ = scan_all(p, &bytes);
     }
 }
+
+#[test]
+fn wall_time_sums_each_session_from_its_start_to_its_last_mark() {
+    let clock = |unix_ms, start| Record::Clock { unix_ms, start };
+    assert_eq!(WallTime::of(&[header(), outcome(0)]), None);
+    let records = [
+        header(),
+        clock(1_000, true),
+        outcome(0),
+        clock(4_000, false),
+        clock(6_000, false),
+        // A crash, then a resume an hour later: the gap is not served time.
+        clock(3_606_000, true),
+        clock(3_607_500, false),
+        // A clock set back counts nothing.
+        clock(3_600_000, false),
+        clock(3_601_000, false),
+    ];
+    let w = WallTime::of(&records).expect("marks");
+    assert_eq!(w.sessions, 2);
+    assert_eq!(w.served_ms, 5_000 + 1_500 + 1_000);
+    assert_eq!((w.first_ms, w.last_ms), (1_000, 3_601_000));
+}
