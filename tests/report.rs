@@ -276,7 +276,7 @@ fn the_report_page_loads_in_a_real_browser_with_every_image() {
     let dom = headless(&["--dump-dom"]);
     let text = String::from_utf8_lossy(&dom.stdout);
     assert!(
-        text.contains("data-images-loaded=\"19\"") && text.contains("data-images-failed=\"0\""),
+        text.contains("data-images-loaded=\"20\"") && text.contains("data-images-failed=\"0\""),
         "{}",
         &text[..text.len().min(400)]
     );
@@ -311,12 +311,21 @@ fn png_stats(path: &Path) -> (u32, u32, usize) {
 }
 
 #[test]
-fn a_nao_report_has_an_animated_replay_of_expert_and_optim1() {
+fn a_nao_report_has_an_animated_replay_of_expert_optim1_and_optim2() {
     let dir = scratch("report-nao");
     nao_run(&dir);
     let out = report(&dir);
     let page = std::fs::read_to_string(out.join("index.html")).unwrap();
-    for name in ["replay-expert.svg", "replay-optim1.svg"] {
+    let table: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("table4.json")).unwrap()).unwrap();
+    for (k, name) in [
+        "replay-expert.svg",
+        "replay-optim1.svg",
+        "replay-optim2.svg",
+    ]
+    .into_iter()
+    .enumerate()
+    {
         assert!(
             page.contains(&format!("src=\"{name}\"")),
             "{name} on the page"
@@ -344,6 +353,29 @@ fn a_nao_report_has_an_animated_replay_of_expert_and_optim1() {
             .and_then(|a| a.attribute("values"))
             .map(|v| v.split(';').count())
             .unwrap();
-        assert_eq!(frames, 10 * 50 / 4, "{name}: 10 s at 12.5 frames/s");
+        // 12.5 frames per simulated second, up to the fall if the trial fell:
+        // the same trial run by `naofarm trial` says how long it lasted.
+        let column = &table["columns"][k];
+        let mut trial = naofarm();
+        trial.args([
+            "trial",
+            "--trials",
+            "1",
+            "--seed",
+            "777",
+            "--walk",
+            "closed-loop",
+            "--json",
+        ]);
+        for (p, v) in column["params"].as_object().unwrap() {
+            trial.arg("--param").arg(format!("{p}={v}"));
+        }
+        let t: serde_json::Value = serde_json::from_slice(&succeed(&mut trial).stdout).unwrap();
+        let sim_s = t["trials"][0]["sim_time_s"].as_f64().unwrap();
+        let want = sim_s * 12.5;
+        assert!(
+            (frames as f64 - want).abs() <= 1.0,
+            "{name}: {frames} frames for {sim_s} s at 12.5 frames/s"
+        );
     }
 }

@@ -138,7 +138,7 @@ fn one(
     let rows = table_iv(dir, &exp, decided, trials, threads)?;
     let mut replays = Vec::new();
     if exp.model == TrialModel::Nao {
-        for r in rows.iter().filter(|r| r.name != "Optim.2") {
+        for r in &rows {
             let file = format!("replay-{}.svg", r.name.to_lowercase().replace('.', ""));
             write(&file, &replay_svg(&exp, &r.params, r.name)?)?;
             replays.push((file, format!("{}: trial seed {TABLE_SEED}", r.name)));
