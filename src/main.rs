@@ -26,6 +26,9 @@ use common::Failure;
 
 fn main() -> ExitCode {
     let args = args::Cli::parse();
+    if matches!(args.command, Command::Coordinator { .. }) {
+        compact_zenoh_runtime();
+    }
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
@@ -51,6 +54,20 @@ fn main() -> ExitCode {
 }
 
 /// Runs the chosen subcommand.
+/// A coordinator's zenoh work (receive, route, send) on one thread instead of
+/// five: its messages arrive one at a time, and every hop between threads is
+/// a wake-up that costs more CPU than the message (docs/fleet.md, measured).
+/// A `ZENOH_RUNTIME` already set is left as it is. Called before any thread starts.
+fn compact_zenoh_runtime() {
+    if std::env::var_os("ZENOH_RUNTIME").is_none() {
+        std::env::set_var(
+            "ZENOH_RUNTIME",
+            "(rx: (handover: app), tx: (handover: app), net: (handover: app), \
+             acc: (handover: app), app: (worker_threads: 1))",
+        );
+    }
+}
+
 fn dispatch(cli: Cli) -> Result<(), Failure> {
     match cli.command {
         Command::Check { experiment, json } => commands::check::check(&experiment, json),

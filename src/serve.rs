@@ -18,8 +18,13 @@ use crate::{
 };
 
 pub fn runtime() -> Result<tokio::runtime::Runtime, Failure> {
+    runtime_with(2)
+}
+
+/// A runtime of `threads` worker threads (besides the thread that blocks on it).
+pub fn runtime_with(threads: usize) -> Result<tokio::runtime::Runtime, Failure> {
     tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
+        .worker_threads(threads)
         .enable_all()
         .build()
         .map_err(|e| Failure::Job(e.into()))
@@ -187,6 +192,8 @@ pub fn summary(
                     "dispatch_ms_p99": c.dispatch_quantile(0.99),
                     "decide_s": c.decide_s,
                     "run_cpu_s": c.run_cpu_s,
+                    "work_requests": c.work_requests,
+                    "adverts": c.adverts,
                 }),
             ),
             _ => view.abandon(),

@@ -81,6 +81,10 @@ pub struct Counters {
     pub decide_s: f64,
     /// CPU seconds of the run's thread (journal, pickOut, CLOP), when known.
     pub run_cpu_s: Option<f64>,
+    /// Work requests answered (each a query and its reply).
+    pub work_requests: u64,
+    /// Adverts published.
+    pub adverts: u64,
 }
 
 impl Counters {
@@ -487,7 +491,9 @@ async fn serve_loop(
     let id = st.facts.id.clone();
     handle_effects(session, st, effects, events).await?;
     advertise(session, st).await;
-    let mut tick = tokio::time::interval(Duration::from_millis(50));
+    // Leases, silences and the grace after a worker's token goes are
+    // seconds long; a tick of 200 ms keeps them, with few wake-ups.
+    let mut tick = tokio::time::interval(Duration::from_millis(200));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let mut ad_tick = tokio::time::interval(ADVERT_EVERY);
     ad_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -596,6 +602,7 @@ pub const ADVERT_EVERY: Duration = Duration::from_secs(1);
 
 /// Publishes the run's advert (workers choose runs by it).
 async fn advertise(session: &Session, st: &mut State) {
+    st.counters.adverts += 1;
     let ad = st.advert();
     match ad.encode() {
         Ok(bytes) => {
@@ -628,6 +635,7 @@ fn on_failure(st: &mut State, f: &TrialFailure) -> Result<(), ServiceError> {
 
 /// A worker asks for trials: grant up to its free slots, in one reply that only it receives.
 async fn on_work(st: &mut State, q: &zenoh::query::Query) {
+    st.counters.work_requests += 1;
     let Some(payload) = q.payload() else {
         st.refuse("a query without payload", "work request: empty");
         reply_err(q, "a work request needs a WorkRequest payload").await;

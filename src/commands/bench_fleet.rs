@@ -69,6 +69,89 @@ fn router(exe: &std::path::Path, procs: &mut Procs) -> anyhow::Result<String> {
 
 /// One received trial outcome: when, which run, how long it ran.
 type Seen = (Instant, String, f64);
+/// One advert: when, which run, how many trials it had ready (0 unless running).
+type Ad = (Instant, String, u32);
+
+/// Weighted max-min fair shares of `capacity` slots: run `i` (weight
+/// `weights[i]`) wants `demand[i]` slots (`None`: as many as it gets, it has
+/// trials ready). Each gets `min(demand, λ·weight)` with λ chosen so the
+/// slots are used up, or its whole demand when all demands fit.
+fn fair_shares(capacity: f64, weights: &[f64], demand: &[Option<f64>]) -> Vec<f64> {
+    let mut share = vec![0.0; weights.len()];
+    let mut open: Vec<usize> = (0..weights.len()).collect();
+    let mut left = capacity;
+    // Water-filling: settle every run whose demand lies under its weighted
+    // share of what is left, then split the rest among the others.
+    loop {
+        let w: f64 = open.iter().map(|&i| weights[i]).sum();
+        if open.is_empty() || w <= 0.0 || left <= 0.0 {
+            return share;
+        }
+        let lambda = left / w;
+        let (capped, rest): (Vec<usize>, Vec<usize>) = open
+            .iter()
+            .partition(|&&i| demand[i].is_some_and(|d| d <= lambda * weights[i]));
+        if capped.is_empty() {
+            for &i in &rest {
+                share[i] = lambda * weights[i];
+            }
+            return share;
+        }
+        for &i in &capped {
+            let d = demand[i].unwrap_or(0.0);
+            share[i] = d;
+            left -= d;
+        }
+        open = rest;
+    }
+}
+
+/// Each run's fair slot-seconds over `[from, to)`, sampled every `step`: at
+/// each instant a run wants what it runs plus what it has ready (its last
+/// advert, at most a second old), and the fleet's slots are shared by weight
+/// among those wants (what a run cannot use goes to the others, by design).
+#[allow(clippy::too_many_arguments)]
+fn fair_slot_seconds(
+    ids: &[String],
+    weights: &[f64],
+    capacity: f64,
+    seen: &[Seen],
+    ads: &[Ad],
+    from: Instant,
+    to: Instant,
+    step: Duration,
+) -> Vec<f64> {
+    let mut fair = vec![0.0; ids.len()];
+    let mut t = from;
+    while t < to {
+        let demand: Vec<Option<f64>> = ids
+            .iter()
+            .map(|id| {
+                let ready = ads
+                    .iter()
+                    .rfind(|(at, r, _)| r == id && *at <= t)
+                    .map_or(0, |(_, _, ready)| *ready);
+                let running = seen
+                    .iter()
+                    .filter(|(end, r, w)| {
+                        r == id
+                            && *end > t
+                            && end
+                                .checked_sub(Duration::from_secs_f64(w.max(0.0)))
+                                .is_some_and(|start| start <= t)
+                    })
+                    .count();
+                #[allow(clippy::cast_precision_loss)]
+                Some(running as f64 + f64::from(ready))
+            })
+            .collect();
+        for (f, s) in fair.iter_mut().zip(fair_shares(capacity, weights, &demand)) {
+            *f += s * step.as_secs_f64();
+        }
+        t += step;
+    }
+    fair
+}
 
 #[derive(Debug, serde::Serialize)]
 struct RunRow {
@@ -76,6 +159,7 @@ struct RunRow {
     priority: u32,
     share: f64,
     priority_share: f64,
+    fair_share: f64,
     trials: u64,
     cpu_s: f64,
     dispatch_ms_p50: Option<f64>,
@@ -92,12 +176,15 @@ struct Report {
     utilisation: f64,
     trials_per_s: f64,
     coordinator_cpu_ms_per_trial: f64,
+    work_requests_per_trial: f64,
+    adverts_per_trial: f64,
     service_cpu_ms_per_trial: f64,
     run_cpu_ms_per_decision: f64,
     decide_ms_per_decision: f64,
     dispatch_ms_p50: f64,
     dispatch_ms_p99: f64,
     worst_share_error: f64,
+    worst_fair_share_error: f64,
     per_run: Vec<RunRow>,
 }
 
@@ -188,13 +275,38 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
         .wait()
         .map_err(|e| anyhow!("zenoh: {e}"))?;
 
+    // Every advert (has the run trials ready?), timestamped here.
+    let ads: Arc<Mutex<Vec<Ad>>> = Arc::new(Mutex::new(Vec::new()));
+    let ad_sink = ads.clone();
+    let _ad_sub = session
+        .declare_subscriber(protocol::keys::adverts_all("naofarm"))
+        .callback(move |s| {
+            use protocol::wire::WireMessage as _;
+            if let Ok(ad) = protocol::wire::RunAdvert::decode(&s.payload().to_bytes()) {
+                let ready = if ad.state == protocol::wire::RunState::Running {
+                    ad.ready
+                } else {
+                    0
+                };
+                if let Ok(mut g) = ad_sink.lock() {
+                    g.push((Instant::now(), ad.id, ready));
+                }
+            }
+        })
+        .wait()
+        .map_err(|e| anyhow!("zenoh: {e}"))?;
+
     let mut coords = Vec::new();
     let (tx, rx) = mpsc::channel::<(usize, serde_json::Value)>();
     for i in 0..a.runs {
         let exp = dir.join(format!("fleet-{i}.toml"));
         std::fs::write(&exp, experiment(i, a))?;
         let priority = a.priorities[i % a.priorities.len()];
-        let mut child = Command::new(&exe)
+        let mut cmd = Command::new(&exe);
+        if let Ok(v) = std::env::var("NAOFARM_BENCH_COORD_ZRT") {
+            cmd.env("ZENOH_RUNTIME", v);
+        }
+        let mut child = cmd
             .arg("coordinator")
             .arg(&exp)
             .arg("--out")
@@ -277,11 +389,24 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
         b.saturating_duration_since(a).as_secs_f64()
     };
     let busy: f64 = seen.iter().map(overlap).sum();
+    let ads = ads.lock().map_err(|_| anyhow!("poisoned"))?.clone();
+    let weights: Vec<f64> = coords.iter().map(|(_, p)| f64::from(*p)).collect();
+    let fair = fair_slot_seconds(
+        &ids,
+        &weights,
+        f64::from(a.workers) * f64::from(a.slots),
+        &seen,
+        &ads,
+        from,
+        to,
+        Duration::from_millis(100),
+    );
+    let fair_sum: f64 = fair.iter().sum();
     let slot_s = f64::from(a.workers) * f64::from(a.slots) * window;
     let psum: f64 = coords.iter().map(|(_, p)| f64::from(*p)).sum();
     let mut per_run = Vec::new();
     let (mut cpu, mut trials, mut decide_s, mut decisions) = (0.0, 0u64, 0.0, 0u64);
-    let mut run_cpu = 0.0;
+    let (mut run_cpu, mut requests, mut adverts) = (0.0, 0u64, 0u64);
     let (mut p50s, mut p99) = (Vec::new(), 0.0f64);
     for (i, f) in finished.iter().enumerate() {
         let f = f.as_ref().context("a run without a final line")?;
@@ -296,6 +421,8 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
         trials += n;
         decide_s += f["decide_s"].as_f64().unwrap_or(0.0);
         run_cpu += f["run_cpu_s"].as_f64().unwrap_or(0.0);
+        requests += f["work_requests"].as_u64().unwrap_or(0);
+        adverts += f["adverts"].as_u64().unwrap_or(0);
         decisions += f["status"]["decided"].as_u64().unwrap_or(0);
         if let Some(x) = f["dispatch_ms_p50"].as_f64() {
             p50s.push(x);
@@ -306,6 +433,11 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
             priority: coords[i].1,
             share: if busy > 0.0 { mine / busy } else { 0.0 },
             priority_share: f64::from(coords[i].1) / psum,
+            fair_share: if fair_sum > 0.0 {
+                fair[i] / fair_sum
+            } else {
+                0.0
+            },
             trials: n,
             cpu_s: c,
             dispatch_ms_p50: f["dispatch_ms_p50"].as_f64(),
@@ -316,6 +448,11 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
     let worst = per_run
         .iter()
         .map(|r| (r.share / r.priority_share - 1.0).abs())
+        .fold(0.0, f64::max);
+    let worst_fair = per_run
+        .iter()
+        .filter(|r| r.fair_share > 0.0)
+        .map(|r| (r.share / r.fair_share - 1.0).abs())
         .fold(0.0, f64::max);
     let report = Report {
         runs: a.runs,
@@ -347,7 +484,10 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
         },
         dispatch_ms_p50: p50s.get(p50s.len() / 2).copied().unwrap_or(0.0),
         dispatch_ms_p99: p99,
+        work_requests_per_trial: requests as f64 / trials.max(1) as f64,
+        adverts_per_trial: adverts as f64 / trials.max(1) as f64,
         worst_share_error: worst,
+        worst_fair_share_error: worst_fair,
         per_run,
     };
     let _ = std::fs::remove_dir_all(&dir);
@@ -361,7 +501,9 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
          utilisation {:.1} %   {:.1} trials/s   dispatch latency p50 {:.1} ms, p99 {:.1} ms\n\
          coordinator CPU {:.3} ms/trial: service {:.3} ms/trial (zenoh, scheduling, topics) \
          + the run's thread {:.2} ms CPU/decision (journal, pickOut, CLOP; {:.2} ms wall)\n\
-         worst share error {:.1} % of the priority's share\n",
+         per trial: {:.2} work requests (query and reply), {:.2} adverts, 1 outcome, 1 published trial\n\
+         worst share error {:.1} % of the priority's share; {:.1} % of the fair share \
+         (the fleet shared by priority among what each run runs or has ready, at each instant)\n",
         report.runs,
         report.workers,
         report.slots,
@@ -375,23 +517,48 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
         report.service_cpu_ms_per_trial,
         report.run_cpu_ms_per_decision,
         report.decide_ms_per_decision,
-        report.worst_share_error * 100.0
+        report.work_requests_per_trial,
+        report.adverts_per_trial,
+        report.worst_share_error * 100.0,
+        report.worst_fair_share_error * 100.0
     );
     out += &format!(
-        "{:<10} {:>8} {:>8} {:>10} {:>8} {:>8}\n",
-        "run", "priority", "share", "its share", "trials", "CPU s"
+        "{:<10} {:>8} {:>8} {:>10} {:>10} {:>8} {:>8}\n",
+        "run", "priority", "share", "its share", "fair share", "trials", "CPU s"
     );
     for r in &report.per_run {
         out += &format!(
-            "{:<10} {:>8} {:>7.1}% {:>9.1}% {:>8} {:>8.2}\n",
+            "{:<10} {:>8} {:>7.1}% {:>9.1}% {:>9.1}% {:>8} {:>8.2}\n",
             r.name,
             r.priority,
             r.share * 100.0,
             r.priority_share * 100.0,
+            r.fair_share * 100.0,
             r.trials,
             r.cpu_s
         );
     }
     crate::common::emit(&out).map_err(|_| anyhow!("output"))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::fair_shares;
+
+    #[test]
+    fn fair_shares_split_by_weight_and_give_what_a_run_cannot_use_to_the_others() {
+        // All with trials ready: by weight.
+        let s = fair_shares(60.0, &[1.0, 2.0, 3.0], &[None, None, None]);
+        assert_eq!(s, [10.0, 20.0, 30.0]);
+        // The weight-3 run runs only 12 and has nothing ready: the rest by 1:2.
+        let s = fair_shares(60.0, &[1.0, 2.0, 3.0], &[None, None, Some(12.0)]);
+        assert_eq!(s, [16.0, 32.0, 12.0]);
+        // Water-filling goes on: capping one can cap the next.
+        let s = fair_shares(100.0, &[1.0, 1.0, 1.0], &[Some(10.0), Some(40.0), None]);
+        assert_eq!(s, [10.0, 40.0, 50.0]);
+        // Demands that all fit are met.
+        let s = fair_shares(100.0, &[1.0, 3.0], &[Some(5.0), Some(7.0)]);
+        assert_eq!(s, [5.0, 7.0]);
+    }
 }

@@ -4,7 +4,7 @@ use crate::{
     args::{JobArgs, NetArgs},
     common::Failure,
     net::open_session,
-    serve::{open_run, runtime, serve_with_view, signals, summary},
+    serve::{open_run, runtime_with, serve_with_view, signals, summary},
 };
 
 /// `naofarm coordinator`.
@@ -20,7 +20,8 @@ pub fn coordinator(job: &JobArgs, net: &NetArgs, json: bool) -> Result<(), Failu
         .zenoh_config("coordinator", default_listen)
         .map_err(Failure::Usage)?;
     let (run, effects) = open_run(job)?;
-    let rt = runtime()?;
+    // The service runs on this thread; one worker for the signal task and the like.
+    let rt = runtime_with(1)?;
     rt.block_on(async {
         let session = open_session(cfg).await?;
         crate::net::say_endpoints(&session, "coordinator").await;
