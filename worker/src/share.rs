@@ -8,8 +8,10 @@
 //! is asking for at the run's mean trial cost, is lowest (start-time fair
 //! queueing). Because every worker does so, the fleet's trial-seconds split
 //! among the runs with work ready in proportion to their priorities. A run
-//! that becomes ready again starts at the fleet's current virtual time, so
-//! it gets its share from then on, not a burst for the time it was idle.
+//! that becomes ready again after its adverts said it had nothing ready
+//! starts at the fleet's current virtual time, so it gets its share from then
+//! on, not a burst for the time it was idle; one this worker skipped only
+//! because its grant came back short (others took the trials) keeps its place.
 //! A run with nothing ready, paused, beyond the worker's limits, or not
 //! heard from for [`FORGET_AFTER`] is skipped, so its share goes to the
 //! others. Must not: talk to zenoh, block, or decide anything about a trial's
@@ -40,6 +42,10 @@ struct RunInfo {
     asking: u32,
     /// A grant came back short: skip until an advert newer than this.
     empty_until: Option<u64>,
+    /// Whether its last advert said it had trials ready (and ran). A short
+    /// grant does not clear it: other workers took the trials, the run was
+    /// not idle.
+    advertised_ready: bool,
     /// Why this worker will not serve it (a limit), if so.
     unservable: Option<String>,
 }
@@ -96,9 +102,10 @@ impl Share {
             held: 0,
             asking: 0,
             empty_until: None,
+            advertised_ready: true,
             unservable: None,
         });
-        let was_ready = r.ready > 0 && r.state == RunState::Running && r.empty_until.is_none();
+        let was_ready = r.advertised_ready;
         if ad.seq < r.seq {
             // A restarted coordinator counts from 1 again; take it as new.
             r.empty_until = None;
@@ -112,9 +119,12 @@ impl Share {
         if r.empty_until.is_some_and(|s| ad.seq > s) {
             r.empty_until = None;
         }
-        let ready = r.ready > 0 && r.state == RunState::Running && r.empty_until.is_none();
-        if ready && !was_ready {
-            // Back to work: from the fleet's present, not its own past.
+        r.advertised_ready = r.ready > 0 && r.state == RunState::Running;
+        if r.advertised_ready && !was_ready {
+            // Back to work after being idle: from the fleet's present, not its
+            // own past. (A run this worker skipped only because others took
+            // its trials first keeps its place: it was never idle, and
+            // restarting it would cost it its share whenever it is raced.)
             r.vt = r.vt.max(vnow);
         }
     }
@@ -289,6 +299,41 @@ mod tests {
         );
         s.advert(&ad("a", 1, 5, 8), now);
         assert_eq!(s.pick(3, 3600.0), [("a".to_string(), 3)]);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_run_raced_by_other_workers_keeps_its_share() {
+        // Run a (priority 3) is raced: every other request of this worker to
+        // it comes back empty (others took its trials) and its next advert
+        // says it has trials again. It was never idle, so it keeps its
+        // place and gets its share of what this worker runs in the rounds it
+        // can be served.
+        let mut s = Share::new();
+        let now = Instant::now();
+        s.advert(&ad("a", 3, 1_000_000, 1), now);
+        s.advert(&ad("b", 1, 1_000_000, 1), now);
+        let (mut seq, mut got) = (1, BTreeMap::<String, f64>::new());
+        for round in 0..2000 {
+            let asks = s.pick(4, 3600.0);
+            for (id, n) in &asks {
+                if id == "a" && round % 2 == 0 {
+                    s.granted(id, *n, 0, Some(0));
+                    seq += 1;
+                    s.advert(&ad("a", 3, 1_000_000, seq), now);
+                } else {
+                    s.granted(id, *n, *n, Some(1_000_000));
+                    for _ in 0..*n {
+                        s.done(id, 1.0);
+                        *got.entry(id.clone()).or_default() += 1.0;
+                    }
+                }
+            }
+        }
+        let a = got["a"] / (got["a"] + got["b"]);
+        assert!(
+            a > 0.7,
+            "a ran {a} of the trial-seconds; its priority's share is 0.75"
+        );
     }
 
     #[tokio::test(start_paused = true)]
