@@ -194,6 +194,7 @@ pub fn summary(
                     "run_cpu_s": c.run_cpu_s,
                     "work_requests": c.work_requests,
                     "adverts": c.adverts,
+                    "empty_grants": c.empty_grants,
                 }),
             ),
             _ => view.abandon(),

@@ -85,6 +85,8 @@ pub struct Counters {
     pub work_requests: u64,
     /// Adverts published.
     pub adverts: u64,
+    /// Work requests answered with no trial (another worker was first, or the run is not running).
+    pub empty_grants: u64,
 }
 
 impl Counters {
@@ -701,6 +703,9 @@ async fn on_work(st: &mut State, q: &zenoh::query::Query) {
                 .dispatch_ms
                 .push((d.as_secs_f64() * 1000.0) as f32);
         }
+    }
+    if trials.is_empty() {
+        st.counters.empty_grants += 1;
     }
     if trials.len() < req.want as usize || st.sched.ready() == 0 {
         // The worker now believes nothing is ready here: tell it when something is.

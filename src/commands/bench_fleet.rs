@@ -178,6 +178,7 @@ struct Report {
     coordinator_cpu_ms_per_trial: f64,
     work_requests_per_trial: f64,
     adverts_per_trial: f64,
+    empty_grants_per_trial: f64,
     service_cpu_ms_per_trial: f64,
     run_cpu_ms_per_decision: f64,
     decide_ms_per_decision: f64,
@@ -406,7 +407,7 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
     let psum: f64 = coords.iter().map(|(_, p)| f64::from(*p)).sum();
     let mut per_run = Vec::new();
     let (mut cpu, mut trials, mut decide_s, mut decisions) = (0.0, 0u64, 0.0, 0u64);
-    let (mut run_cpu, mut requests, mut adverts) = (0.0, 0u64, 0u64);
+    let (mut run_cpu, mut requests, mut adverts, mut empty) = (0.0, 0u64, 0u64, 0u64);
     let (mut p50s, mut p99) = (Vec::new(), 0.0f64);
     for (i, f) in finished.iter().enumerate() {
         let f = f.as_ref().context("a run without a final line")?;
@@ -423,6 +424,7 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
         run_cpu += f["run_cpu_s"].as_f64().unwrap_or(0.0);
         requests += f["work_requests"].as_u64().unwrap_or(0);
         adverts += f["adverts"].as_u64().unwrap_or(0);
+        empty += f["empty_grants"].as_u64().unwrap_or(0);
         decisions += f["status"]["decided"].as_u64().unwrap_or(0);
         if let Some(x) = f["dispatch_ms_p50"].as_f64() {
             p50s.push(x);
@@ -486,6 +488,7 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
         dispatch_ms_p99: p99,
         work_requests_per_trial: requests as f64 / trials.max(1) as f64,
         adverts_per_trial: adverts as f64 / trials.max(1) as f64,
+        empty_grants_per_trial: empty as f64 / trials.max(1) as f64,
         worst_share_error: worst,
         worst_fair_share_error: worst_fair,
         per_run,
@@ -501,7 +504,8 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
          utilisation {:.1} %   {:.1} trials/s   dispatch latency p50 {:.1} ms, p99 {:.1} ms\n\
          coordinator CPU {:.3} ms/trial: service {:.3} ms/trial (zenoh, scheduling, topics) \
          + the run's thread {:.2} ms CPU/decision (journal, pickOut, CLOP; {:.2} ms wall)\n\
-         per trial: {:.2} work requests (query and reply), {:.2} adverts, 1 outcome, 1 published trial\n\
+         per trial: {:.2} work requests (query and reply; {:.2} granted nothing), {:.2} adverts, \
+         1 outcome, 1 published trial\n\
          worst share error {:.1} % of the priority's share; {:.1} % of the fair share \
          (the fleet shared by priority among what each run runs or has ready, at each instant)\n",
         report.runs,
@@ -518,6 +522,7 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
         report.run_cpu_ms_per_decision,
         report.decide_ms_per_decision,
         report.work_requests_per_trial,
+        report.empty_grants_per_trial,
         report.adverts_per_trial,
         report.worst_share_error * 100.0,
         report.worst_fair_share_error * 100.0
