@@ -581,3 +581,64 @@ fn the_router_lets_each_role_say_only_its_part() {
     });
     assert!(orx.try_recv().is_err(), "a worker heard outcomes");
 }
+
+#[test]
+fn watch_says_when_two_sessions_claim_one_run() {
+    use zenoh::Wait;
+    let dir = scratch("fleet-claims");
+    let (_router, ep) = router(&dir);
+    let exp = experiment(&dir, "a.toml", "claimed", 1, 5);
+    // A run with no worker stays running: its coordinator answers for it.
+    let _c = coordinator(&dir, &exp, &dir.join("a"), &ep, 1);
+    let runs = listed(&ep, 1);
+    assert_eq!(runs[0]["claims"], 1, "one coordinator answers: {runs:?}");
+    let (run, id) = (
+        runs[0]["run"].as_str().unwrap().to_string(),
+        runs[0]["id"].as_str().unwrap().to_string(),
+    );
+    // A stranger answers for the same run id with a copy of its status.
+    let mut status = runs[0].clone();
+    status.as_object_mut().unwrap().remove("claims");
+    let body = status.to_string();
+    let mut cfg = zenoh::Config::default();
+    for (k, v) in [
+        ("mode", "\"client\"".to_string()),
+        ("scouting/multicast/enabled", "false".to_string()),
+        ("connect/endpoints", format!("[\"{ep}\"]")),
+    ] {
+        cfg.insert_json5(k, &v).unwrap();
+    }
+    let stranger = zenoh::open(cfg).wait().unwrap();
+    let _forged = stranger
+        .declare_queryable(format!("naofarm/{run}/{id}/status"))
+        .callback(move |q| {
+            let _ = q.reply(q.key_expr().clone(), body.clone()).wait();
+        })
+        .wait()
+        .unwrap();
+    let deadline = Instant::now() + TIMEOUT;
+    loop {
+        let out = succeed(naofarm().args(["watch", "--json", "--connect", &ep]));
+        let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect();
+        assert_eq!(lines.len(), 1, "one run, listed once: {lines:?}");
+        if lines[0]["claims"] == 2 {
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert!(
+                err.contains(&format!("run {id} (claimed) is claimed by 2 sessions")),
+                "{err}"
+            );
+            break;
+        }
+        assert!(Instant::now() < deadline, "the second claim was never seen");
+    }
+    let out = succeed(naofarm().args(["watch", "--connect", &ep]));
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains("CLAIMED BY 2"),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    let _ = stranger.close().wait();
+}

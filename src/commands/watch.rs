@@ -101,15 +101,25 @@ async fn list(
         eprintln!("no runs answer at {}", net.connect.join(", "));
         return Ok(());
     }
-    for s in &runs {
+    for (s, claims) in &runs {
+        if *claims > 1 {
+            eprintln!("{}", claimed_warning(s, *claims));
+        }
         if json {
-            match s.to_json() {
-                Ok(text) => outln!("{text}"),
-                Err(e) => return Err(Failure::Job(e.into())),
-            }
+            let mut v = serde_json::from_str::<serde_json::Value>(
+                &s.to_json().map_err(|e| Failure::Job(e.into()))?,
+            )
+            .map_err(|e| Failure::Job(e.into()))?;
+            v["claims"] = serde_json::json!(claims);
+            outln!("{v}");
         } else {
+            let mark = if *claims > 1 {
+                format!("  CLAIMED BY {claims}")
+            } else {
+                String::new()
+            };
             outln!(
-                "{:<24} {}  {:>5}/{:<5} decided  A {} E {} R {}  priority {}  {} workers  {:.1} trials/s  {}",
+                "{:<24} {}  {:>5}/{:<5} decided  A {} E {} R {}  priority {}  {} workers  {:.1} trials/s  {}{mark}",
                 s.run,
                 s.id,
                 s.decided,
@@ -127,12 +137,23 @@ async fn list(
     Ok(())
 }
 
-/// Every run that answers a status query, by name then id.
+/// What `watch` says when more than one session answers for one run id.
+fn claimed_warning(s: &RunStatus, claims: usize) -> String {
+    format!(
+        "warning: run {} ({}) is claimed by {claims} sessions: another coordinator serves a copy of \
+         its directory, or someone forges its status; what is shown is the first answer. \
+         Over `--tls`, only sessions with a coordinator certificate can answer",
+        s.id, s.run
+    )
+}
+
+/// Every run that answers a status query, by name then id, each with how
+/// many answers claimed it (more than one: two coordinators, or a forger).
 async fn statuses(
     session: &Session,
     prefix: &str,
     deadline: Instant,
-) -> Result<Vec<RunStatus>, Failure> {
+) -> Result<Vec<(RunStatus, usize)>, Failure> {
     let answers = query_until(session, &keys::status_all(prefix), deadline).await?;
     let mut runs: Vec<RunStatus> = answers
         .iter()
@@ -144,9 +165,16 @@ async fn statuses(
             }
         })
         .collect();
-    runs.sort_by(|a, b| (&a.run, &a.id).cmp(&(&b.run, &b.id)));
-    runs.dedup_by(|a, b| a.id == b.id);
-    Ok(runs)
+    runs.sort_by(|a, b| a.id.cmp(&b.id));
+    let mut claimed: Vec<(RunStatus, usize)> = Vec::new();
+    for s in runs {
+        match claimed.last_mut() {
+            Some((first, n)) if first.id == s.id => *n += 1,
+            _ => claimed.push((s, 1)),
+        }
+    }
+    claimed.sort_by(|a, b| (&a.0.run, &a.0.id).cmp(&(&b.0.run, &b.0.id)));
+    Ok(claimed)
 }
 
 /// The one run that `run` names: its id, the start of its id, or its name
@@ -159,11 +187,16 @@ pub async fn resolve(
     connect: &str,
 ) -> Result<RunStatus, Failure> {
     let runs = statuses(session, prefix, deadline).await?;
-    let by_id: Vec<&RunStatus> = runs.iter().filter(|s| s.id.starts_with(run)).collect();
-    let by_name: Vec<&RunStatus> = runs.iter().filter(|s| s.run == run).collect();
+    let by_id: Vec<&(RunStatus, usize)> = runs.iter().filter(|s| s.0.id.starts_with(run)).collect();
+    let by_name: Vec<&(RunStatus, usize)> = runs.iter().filter(|s| s.0.run == run).collect();
     let found = if by_id.len() == 1 { by_id } else { by_name };
     match found.as_slice() {
-        [one] => Ok((*one).clone()),
+        [(one, claims)] => {
+            if *claims > 1 {
+                eprintln!("{}", claimed_warning(one, *claims));
+            }
+            Ok(one.clone())
+        }
         [] => Err(Failure::Job(anyhow!(
             "no coordinator answers for run `{run}` at {connect}: the run is finished or unknown \
              (`naofarm watch` without a run lists the runs that answer)"
@@ -172,7 +205,7 @@ pub async fn resolve(
             "`{run}` names {} runs; give one of their ids: {}",
             many.len(),
             many.iter()
-                .map(|s| s.id.as_str())
+                .map(|s| s.0.id.as_str())
                 .collect::<Vec<_>>()
                 .join(", ")
         ))),
