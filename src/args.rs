@@ -299,6 +299,10 @@ pub struct FarmBenchArgs {
     /// The experiment whose space and constants the runs use (the model is set per case).
     #[arg(long, default_value = "experiments/physical-technical.toml")]
     pub experiment: std::path::PathBuf,
+    /// Run every case twice: over plain TCP and over mutual TLS (certificates
+    /// made by `naofarm certs` in a temporary directory), to show what TLS costs.
+    #[arg(long)]
+    pub tls: bool,
     /// Machine-readable output.
     #[arg(long)]
     pub json: bool,

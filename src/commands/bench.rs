@@ -111,6 +111,8 @@ fn clop(a: &ClopBenchArgs) -> Result<(), Failure> {
 #[derive(Debug, serde::Serialize)]
 struct FarmRow {
     model: &'static str,
+    /// Over mutual TLS (`tls/` endpoints, role certificates), or plain TCP.
+    tls: bool,
     workers: u32,
     trials: u64,
     wall_s: f64,
@@ -138,6 +140,7 @@ fn farm_case(
     model: &'static str,
     workers: u32,
     iterations: u64,
+    tls: Option<&std::path::Path>,
 ) -> anyhow::Result<FarmRow> {
     use std::io::{BufRead, BufReader, Read};
     use std::process::{Command, Stdio};
@@ -149,12 +152,21 @@ fn farm_case(
     let _ = std::fs::remove_dir_all(&out);
     let started = std::time::Instant::now();
     // The coordinator listens on a port the OS picks and says which.
-    let mut coordinator = Command::new(&exe)
-        .arg("coordinator")
+    let mut coordinator = Command::new(&exe);
+    coordinator.arg("coordinator");
+    if let Some(pki) = tls {
+        coordinator.arg("--tls").arg(pki);
+    }
+    let listen = if tls.is_some() {
+        "tls/127.0.0.1:0"
+    } else {
+        "tcp/127.0.0.1:0"
+    };
+    let mut coordinator = coordinator
         .arg(experiment)
         .arg("--out")
         .arg(&out)
-        .args(["--json", "--model", model, "--listen", "tcp/127.0.0.1:0"])
+        .args(["--json", "--model", model, "--listen", listen])
         .args(["--iterations", &iterations.to_string()])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -179,13 +191,13 @@ fn farm_case(
     });
     let mut pool = Workers(Vec::new());
     for _ in 0..workers {
-        pool.0.push(
-            Command::new(&exe)
-                .args(["worker", "--slots", "1", "--connect", &endpoint])
-                .stdout(Stdio::null())
-                .stderr(Stdio::null())
-                .spawn()?,
-        );
+        let mut w = Command::new(&exe);
+        w.args(["worker", "--slots", "1", "--connect", &endpoint]);
+        if let Some(pki) = tls {
+            w.arg("--tls").arg(pki);
+        }
+        pool.0
+            .push(w.stdout(Stdio::null()).stderr(Stdio::null()).spawn()?);
     }
     let mut stdout = String::new();
     if let Some(mut o) = coordinator.stdout.take() {
@@ -212,6 +224,7 @@ fn farm_case(
     let per_trial = |x: f64| if trials > 0 { x / trials as f64 } else { 0.0 };
     Ok(FarmRow {
         model,
+        tls: tls.is_some(),
         workers,
         trials,
         wall_s,
@@ -230,30 +243,65 @@ fn farm(a: &FarmBenchArgs) -> Result<(), Failure> {
     // Refuse a bad file before starting any process.
     crate::common::load_experiment(&a.experiment)?;
     let exp = &a.experiment;
+    // With --tls: certificates for every role, made as a user makes them.
+    let pki = std::env::temp_dir().join(format!("naofarm-bench-pki-{}", std::process::id()));
+    let links: Vec<Option<&std::path::Path>> = if a.tls {
+        let _ = std::fs::remove_dir_all(&pki);
+        let made = std::process::Command::new(
+            std::env::current_exe().map_err(|e| Failure::Job(e.into()))?,
+        )
+        .arg("certs")
+        .arg(&pki)
+        .output()
+        .map_err(|e| Failure::Job(e.into()))?;
+        if !made.status.success() {
+            return Err(Failure::Job(anyhow!(
+                "naofarm certs failed: {}",
+                String::from_utf8_lossy(&made.stderr)
+            )));
+        }
+        vec![None, Some(pki.as_path())]
+    } else {
+        vec![None]
+    };
     let mut rows = Vec::new();
+    let link = |t: Option<&std::path::Path>| if t.is_some() { "TLS" } else { "TCP" };
     for &w in &a.workers {
-        eprintln!("synthetic, {w} worker(s)…");
-        rows.push(farm_case(exp, "synthetic", w, a.iterations).map_err(Failure::Job)?);
+        for &t in &links {
+            eprintln!("synthetic, {w} worker(s), {}…", link(t));
+            rows.push(farm_case(exp, "synthetic", w, a.iterations, t).map_err(Failure::Job)?);
+        }
     }
     if a.nao_iterations > 0 {
         for w in [1, 2] {
-            eprintln!("nao, {w} worker(s)…");
-            rows.push(farm_case(exp, "nao", w, a.nao_iterations).map_err(Failure::Job)?);
+            for &t in &links {
+                eprintln!("nao, {w} worker(s), {}…", link(t));
+                rows.push(farm_case(exp, "nao", w, a.nao_iterations, t).map_err(Failure::Job)?);
+            }
         }
     }
+    let _ = std::fs::remove_dir_all(&pki);
     if a.json {
         let text = serde_json::to_string_pretty(&rows).map_err(|e| Failure::Job(e.into()))?;
         return crate::common::emit(&format!("{text}\n"));
     }
     let mut out = format!(
-        "{:<10} {:>7} {:>7} {:>8} {:>10} {:>16} {:>22}\n",
-        "model", "workers", "trials", "wall s", "trials/s", "coord. CPU s", "coord. CPU ms/trial"
+        "{:<10} {:>4} {:>7} {:>7} {:>8} {:>10} {:>16} {:>22}\n",
+        "model",
+        "link",
+        "workers",
+        "trials",
+        "wall s",
+        "trials/s",
+        "coord. CPU s",
+        "coord. CPU ms/trial"
     );
     let f = |v: Option<f64>, p: usize| v.map_or("-".to_string(), |v| format!("{v:.p$}"));
     for r in &rows {
         out += &format!(
-            "{:<10} {:>7} {:>7} {:>8.2} {:>10.1} {:>16} {:>22}\n",
+            "{:<10} {:>4} {:>7} {:>7} {:>8.2} {:>10.1} {:>16} {:>22}\n",
             r.model,
+            if r.tls { "TLS" } else { "TCP" },
             r.workers,
             r.trials,
             r.wall_s,
@@ -262,7 +310,7 @@ fn farm(a: &FarmBenchArgs) -> Result<(), Failure> {
             f(r.coordinator_cpu_per_trial_ms, 3)
         );
     }
-    let nao: Vec<&FarmRow> = rows.iter().filter(|r| r.model == "nao").collect();
+    let nao: Vec<&FarmRow> = rows.iter().filter(|r| r.model == "nao" && !r.tls).collect();
     if let [one, two] = nao.as_slice() {
         if one.trials_per_s > 0.0 {
             out += &format!(
