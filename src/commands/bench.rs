@@ -121,6 +121,15 @@ struct FarmRow {
     coordinator_cpu_per_trial_ms: Option<f64>,
 }
 
+/// How `bench farm` names a case's link.
+fn link_name(tls: bool) -> &'static str {
+    if tls {
+        "TLS"
+    } else {
+        "TCP"
+    }
+}
+
 /// Kills the worker processes however the bench ends.
 struct Workers(Vec<std::process::Child>);
 
@@ -265,17 +274,16 @@ fn farm(a: &FarmBenchArgs) -> Result<(), Failure> {
         vec![None]
     };
     let mut rows = Vec::new();
-    let link = |t: Option<&std::path::Path>| if t.is_some() { "TLS" } else { "TCP" };
     for &w in &a.workers {
         for &t in &links {
-            eprintln!("synthetic, {w} worker(s), {}…", link(t));
+            eprintln!("synthetic, {w} worker(s), {}…", link_name(t.is_some()));
             rows.push(farm_case(exp, "synthetic", w, a.iterations, t).map_err(Failure::Job)?);
         }
     }
     if a.nao_iterations > 0 {
         for w in [1, 2] {
             for &t in &links {
-                eprintln!("nao, {w} worker(s), {}…", link(t));
+                eprintln!("nao, {w} worker(s), {}…", link_name(t.is_some()));
                 rows.push(farm_case(exp, "nao", w, a.nao_iterations, t).map_err(Failure::Job)?);
             }
         }
@@ -301,7 +309,7 @@ fn farm(a: &FarmBenchArgs) -> Result<(), Failure> {
         out += &format!(
             "{:<10} {:>4} {:>7} {:>7} {:>8.2} {:>10.1} {:>16} {:>22}\n",
             r.model,
-            if r.tls { "TLS" } else { "TCP" },
+            link_name(r.tls),
             r.workers,
             r.trials,
             r.wall_s,

@@ -106,10 +106,7 @@ async fn list(
             eprintln!("{}", claimed_warning(s, *claims));
         }
         if json {
-            let mut v = serde_json::from_str::<serde_json::Value>(
-                &s.to_json().map_err(|e| Failure::Job(e.into()))?,
-            )
-            .map_err(|e| Failure::Job(e.into()))?;
+            let mut v = serde_json::to_value(s).map_err(|e| Failure::Job(e.into()))?;
             v["claims"] = serde_json::json!(claims);
             outln!("{v}");
         } else {
