@@ -30,6 +30,11 @@ pub enum Command {
         /// so that `naofarm watch` can be pointed at it.
         #[arg(long, value_name = "ENDPOINT")]
         listen: Option<String>,
+        /// Mutual TLS with the certificates in DIR (`naofarm certs DIR`): the
+        /// local workers and every watcher connect with a certificate of that
+        /// CA, and the roles are enforced (`--listen` must be tls/127.0.0.1:PORT).
+        #[arg(long, value_name = "DIR")]
+        tls: Option<PathBuf>,
     },
     /// The coordinator alone (cluster use): owns the run, its journal and dispatch.
     Coordinator {
@@ -70,6 +75,9 @@ pub enum Command {
         #[arg(long, value_name = "DIR")]
         tls: Option<PathBuf>,
     },
+    /// This host's worker fingerprint (the hash of fixed probe trials and the
+    /// naofarm version): workers of one fingerprint return the same bits.
+    Fingerprint,
     /// Create a CA and one certificate per role (coordinator, worker, watcher, router) for --tls.
     Certs {
         /// Where the PEM files go (keys with mode 0600).

@@ -76,7 +76,8 @@ fn dispatch(cli: Cli) -> Result<(), Failure> {
             workers,
             json,
             listen,
-        } => commands::run::run(&job, workers, json, listen.as_deref()),
+            tls,
+        } => commands::run::run(&job, workers, json, listen.as_deref(), tls),
         Command::Coordinator { job, net, json } => {
             commands::coordinator::coordinator(&job, &net, json)
         }
@@ -92,6 +93,7 @@ fn dispatch(cli: Cli) -> Result<(), Failure> {
             config,
             tls,
         } => commands::router::router(&listen, config.as_deref(), tls),
+        Command::Fingerprint => commands::fingerprint(),
         Command::Certs {
             dir,
             names,

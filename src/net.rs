@@ -77,6 +77,14 @@ impl NetArgs {
                     anyhow::bail!("`{e}`: with --tls every endpoint is tls/HOST:PORT");
                 }
             }
+            // A coordinator that workers and watchers reach directly (no
+            // router between) enforces the roles itself, as the router does.
+            let listens = !self.listen.is_empty() || !default_listen.is_empty();
+            if role == "coordinator" && listens && self.connect.is_empty() && self.config.is_none()
+            {
+                cfg.insert_json5("access_control", &acl(&self.prefix))
+                    .map_err(|e| anyhow::anyhow!("access control: {e}"))?;
+            }
         }
         Ok(cfg)
     }

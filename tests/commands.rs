@@ -546,3 +546,64 @@ fn deploy_configs_are_valid_zenoh_configs() {
         }
     }
 }
+
+/// Every deploy recipe runs the fleet over mutual TLS: each naofarm command
+/// it starts that talks to the network passes `--tls`, every endpoint is
+/// `tls/…`, the certificates are made by `naofarm certs`, and the SLURM job
+/// is valid bash.
+#[test]
+fn deploy_recipes_run_over_tls() {
+    let recipes = [
+        "compose.yaml",
+        "slurm/farm.sbatch",
+        "systemd/naofarm-router.service",
+        "systemd/naofarm-coordinator.service",
+        "systemd/naofarm-worker.service",
+    ];
+    let mut commands = 0;
+    for r in recipes {
+        let text = std::fs::read_to_string(root().join("deploy").join(r)).unwrap();
+        assert!(!text.contains("tcp/"), "{r} names a plain TCP endpoint");
+        // A command: from `naofarm ROLE` to the line's end, or a compose
+        // `command: ["ROLE", …]` to its closing bracket.
+        for w in ["router", "worker", "coordinator", "watch"] {
+            for (shell, start) in [
+                (true, format!("naofarm {w} ")),
+                (false, format!("[\"{w}\"")),
+            ] {
+                for (at, _) in text.match_indices(&start) {
+                    let line_start = text[..at].rfind('\n').map_or(0, |i| i + 1);
+                    let before = &text[line_start..at];
+                    if before.trim_start().starts_with('#')
+                        || before.starts_with("Description=")
+                        || (!shell && !before.contains("command:"))
+                    {
+                        continue;
+                    }
+                    let end = if shell { '\n' } else { ']' };
+                    let cmd = text[at..].split(end).next().unwrap();
+                    commands += 1;
+                    assert!(cmd.contains("--tls"), "{r}: without --tls: {cmd}");
+                }
+            }
+        }
+    }
+    assert!(commands >= 9, "only {commands} commands found");
+    let sbatch = std::fs::read_to_string(root().join("deploy/slurm/farm.sbatch")).unwrap();
+    assert!(sbatch.contains("naofarm certs"));
+    let compose = std::fs::read_to_string(root().join("deploy/compose.yaml")).unwrap();
+    assert!(compose.contains("[\"certs\""));
+    let certs_unit =
+        std::fs::read_to_string(root().join("deploy/systemd/naofarm-certs.service")).unwrap();
+    assert!(certs_unit.contains("naofarm certs"));
+    let syntax = std::process::Command::new("bash")
+        .arg("-n")
+        .arg(root().join("deploy/slurm/farm.sbatch"))
+        .output()
+        .unwrap();
+    assert!(
+        syntax.status.success(),
+        "{}",
+        String::from_utf8_lossy(&syntax.stderr)
+    );
+}

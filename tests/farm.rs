@@ -928,6 +928,7 @@ fn bad_messages_are_counted_and_change_nothing() {
         fall_time_s: None,
         sim_time_s: 10.0,
         wall_time_s: 0.0,
+        fingerprint: 0,
     };
     let mut nan = good.encode().unwrap();
     // Same layout with x_m's bytes replaced by NaN: find 1.0f64 and swap it.

@@ -426,6 +426,7 @@ fn a_farm_over_mutual_tls_gives_the_local_history_and_refuses_strangers() {
         "{}",
         String::from_utf8_lossy(&listed.stdout)
     );
+    python_watcher_sees(&ep, &pki, "tls");
     let tls_worker = |_| {
         Proc::spawn(
             naofarm()
@@ -641,4 +642,465 @@ fn watch_says_when_two_sessions_claim_one_run() {
         String::from_utf8_lossy(&out.stdout)
     );
     let _ = stranger.close().wait();
+}
+
+/// The fingerprint `naofarm fingerprint` prints (optionally as a worker with
+/// the fault hook that makes it report another).
+fn fingerprint(faulty: bool) -> u64 {
+    let mut cmd = naofarm();
+    cmd.arg("fingerprint");
+    if faulty {
+        cmd.env("NAOFARM_FAULT_FINGERPRINT", "1");
+    }
+    let out = succeed(&mut cmd);
+    let text = String::from_utf8_lossy(&out.stdout).to_string();
+    u64::from_str_radix(text.split(' ').next().unwrap(), 16).unwrap()
+}
+
+#[test]
+fn a_run_takes_one_worker_fingerprint_and_a_resume_without_it_ends() {
+    let dir = scratch("fleet-fingerprint");
+    let (ours, other) = (fingerprint(false), fingerprint(true));
+    assert_ne!(ours, other);
+    assert_eq!(ours, fingerprint(false), "the probe gives the same bits");
+    let exp = experiment(&dir, "f.toml", "fp", 5, 8);
+    let want = alone(&dir, &exp, "alone");
+    let (_router, ep) = router(&dir);
+    let out = dir.join("run");
+    let mut c = coordinator(&dir, &exp, &out, &ep, 1);
+    // A worker of this build pins the run's fingerprint; then one that
+    // reports another joins, with more slots.
+    let w = worker(&dir, &ep, 1, 150, &[]);
+    wait_line(&c, "fingerprint is pinned");
+    let faulty = Proc::spawn(
+        naofarm()
+            .args(["worker", "--connect", &ep, "--slots", "4"])
+            .env("NAOFARM_FAULT_FINGERPRINT", "1")
+            .env("RUST_LOG", "warn")
+            .stdout(Stdio::null()),
+        &dir,
+        "faulty-worker",
+    );
+    wait_line(&faulty, "will not serve the run");
+    assert!(wait_exit(&mut c).success());
+    let recs = records(&out);
+    assert_eq!(bits(&decided(&recs)), want, "the history of the run alone");
+    let pinned: Vec<u64> = recs
+        .iter()
+        .filter_map(|r| match r {
+            Record::Fingerprint { fingerprint, .. } => Some(*fingerprint),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(pinned, vec![ours], "journaled once, the first worker's");
+    let first_outcome = recs
+        .iter()
+        .position(|r| matches!(r, Record::Outcome { .. }))
+        .unwrap();
+    let fp_at = recs
+        .iter()
+        .position(|r| matches!(r, Record::Fingerprint { .. }))
+        .unwrap();
+    assert!(fp_at < first_outcome, "journaled before any outcome");
+    let f = finished(&out);
+    let reasons = &f["refused_reasons"];
+    assert!(
+        reasons["work request of another worker fingerprint"]
+            .as_u64()
+            .is_some_and(|n| n >= 1),
+        "{f}"
+    );
+    let err = c.stderr();
+    assert!(err.contains(&format!("{other:016x}")), "{err}");
+    drop(faulty);
+    drop(w);
+
+    // Resumed (extended) where only workers of another fingerprint serve:
+    // it says so and exits 1 instead of waiting; its history is kept.
+    let before = std::fs::read(out.join("journal.nfj")).unwrap();
+    let mut c2 = Proc::spawn(
+        naofarm()
+            .args([
+                "coordinator",
+                "--json",
+                "--connect",
+                &ep,
+                "--iterations",
+                "12",
+            ])
+            .arg(&exp)
+            .arg("--out")
+            .arg(&out)
+            .stdout(Stdio::null()),
+        &dir,
+        "coordinator",
+    );
+    let _faulty2 = Proc::spawn(
+        naofarm()
+            .args(["worker", "--connect", &ep, "--slots", "2"])
+            .env("NAOFARM_FAULT_FINGERPRINT", "1")
+            .stdout(Stdio::null()),
+        &dir,
+        "faulty-worker",
+    );
+    let status = wait_exit(&mut c2);
+    assert_eq!(status.code(), Some(1), "{}", c2.stderr());
+    let err = c2.stderr();
+    assert!(
+        err.contains(&format!("fingerprint {ours:016x}"))
+            && err.contains(&format!("{other:016x} on worker")),
+        "{err}"
+    );
+    let after = std::fs::read(out.join("journal.nfj")).unwrap();
+    assert_eq!(
+        &after[..before.len()],
+        &before[..],
+        "nothing before is changed"
+    );
+    assert_eq!(bits(&decided(&records(&out))), want);
+}
+
+#[test]
+fn run_over_tls_lets_each_role_do_only_its_part() {
+    let dir = scratch("fleet-run-tls");
+    let pki = dir.join("pki");
+    succeed(naofarm().arg("certs").arg(&pki));
+    // A certificate of the same CA whose role is `worker`, filed as a
+    // coordinator's: what a worker's owner could try.
+    let posing = dir.join("posing");
+    std::fs::create_dir_all(&posing).unwrap();
+    std::fs::copy(pki.join("ca.pem"), posing.join("ca.pem")).unwrap();
+    std::fs::copy(pki.join("worker.pem"), posing.join("coordinator.pem")).unwrap();
+    std::fs::copy(pki.join("worker.key"), posing.join("coordinator.key")).unwrap();
+    let exp = experiment(&dir, "r.toml", "direct", 3, 100_000);
+    let out = dir.join("run");
+    // A tcp endpoint with --tls is a usage error.
+    let err = fails(
+        naofarm()
+            .args(["run", "--listen", "tcp/127.0.0.1:0", "--tls"])
+            .arg(&pki)
+            .arg(&exp)
+            .arg("--out")
+            .arg(dir.join("never")),
+        2,
+    );
+    assert!(err.contains("tls/127.0.0.1:PORT"), "{err}");
+    let mut run = Proc::spawn(
+        naofarm()
+            .args(["run", "--json", "--workers", "2", "--tls"])
+            .arg(&pki)
+            .arg(&exp)
+            .arg("--out")
+            .arg(&out)
+            .stdout(std::fs::File::create(out.with_extension("stdout")).unwrap()),
+        &dir,
+        "run",
+    );
+    let line = wait_line(&run, "zenoh on tls/127.0.0.1:");
+    let ep = line
+        .split_whitespace()
+        .find(|w| w.starts_with("tls/127.0.0.1:"))
+        .unwrap()
+        .trim_end_matches(';')
+        .to_string();
+    // The watcher's certificate reads the run's status (its local workers,
+    // over TLS through the coordinator's own access control, make progress).
+    let deadline = Instant::now() + TIMEOUT;
+    loop {
+        let o = succeed(
+            naofarm()
+                .args([
+                    "watch",
+                    "--json",
+                    "--connect",
+                    &ep,
+                    "--timeout-s",
+                    "10",
+                    "--tls",
+                ])
+                .arg(&pki),
+        );
+        let runs: Vec<serde_json::Value> = String::from_utf8_lossy(&o.stdout)
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect();
+        if runs
+            .first()
+            .is_some_and(|r| r["decided"].as_u64() > Some(2))
+        {
+            break;
+        }
+        assert!(Instant::now() < deadline, "no progress: {runs:?}");
+    }
+    // A worker's certificate cannot control the run: the coordinator's ACL
+    // drops its queries, so no coordinator answers it...
+    let err = fails(
+        &mut ctl(
+            &ep,
+            &[
+                "direct",
+                "pause",
+                "--timeout-s",
+                "3",
+                "--tls",
+                posing.to_str().unwrap(),
+            ],
+        ),
+        1,
+    );
+    assert!(err.contains("no coordinator answers"), "{err}");
+    // ...while the coordinator's certificate stops it; by then the denied
+    // pause has not arrived either (only the stop is journaled).
+    succeed(&mut ctl(
+        &ep,
+        &[
+            "direct",
+            "stop",
+            "--timeout-s",
+            "30",
+            "--tls",
+            pki.to_str().unwrap(),
+        ],
+    ));
+    assert!(wait_exit(&mut run).success(), "{}", run.stderr());
+    let actions: Vec<Control> = records(&out)
+        .iter()
+        .filter_map(|r| match r {
+            Record::Control { action, .. } => Some(*action),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(actions, vec![Control::Stop], "{actions:?}");
+}
+
+/// Network namespaces for one test: a bridge in a namespace of its own and
+/// one namespace per host, each joined to the bridge by a veth pair
+/// (10.77.0.N/24); all removed when dropped.
+struct Hosts {
+    bridge: String,
+    hosts: Vec<String>,
+}
+
+impl Hosts {
+    fn ip(args: &[&str]) -> Result<(), String> {
+        let out = Command::new("ip")
+            .args(args)
+            .output()
+            .map_err(|e| format!("ip: {e}"))?;
+        if out.status.success() {
+            Ok(())
+        } else {
+            Err(format!(
+                "ip {}: {}",
+                args.join(" "),
+                String::from_utf8_lossy(&out.stderr).trim()
+            ))
+        }
+    }
+
+    /// `n` hosts, or why they cannot be made here (not root, no `ip`).
+    fn new(n: usize) -> Result<Self, String> {
+        let tag = std::process::id();
+        let mut me = Self {
+            bridge: format!("nfbr{tag}"),
+            hosts: Vec::new(),
+        };
+        Self::ip(&["netns", "add", &me.bridge])?;
+        Self::ip(&["-n", &me.bridge, "link", "add", "br0", "type", "bridge"])?;
+        Self::ip(&["-n", &me.bridge, "link", "set", "br0", "up"])?;
+        for i in 1..=n {
+            let h = format!("nfh{i}x{tag}");
+            Self::ip(&["netns", "add", &h])?;
+            me.hosts.push(h.clone());
+            let vb = format!("vb{i}");
+            Self::ip(&[
+                "-n", &me.bridge, "link", "add", &vb, "type", "veth", "peer", "name", "eth0",
+                "netns", &h,
+            ])?;
+            Self::ip(&["-n", &me.bridge, "link", "set", &vb, "master", "br0", "up"])?;
+            Self::ip(&[
+                "-n",
+                &h,
+                "addr",
+                "add",
+                &format!("10.77.0.{i}/24"),
+                "dev",
+                "eth0",
+            ])?;
+            Self::ip(&["-n", &h, "link", "set", "eth0", "up"])?;
+            Self::ip(&["-n", &h, "link", "set", "lo", "up"])?;
+        }
+        Ok(me)
+    }
+
+    /// Host `i`'s side of the bridge down (its link cut) or up (healed).
+    fn link(&self, i: usize, up: bool) {
+        let state = if up { "up" } else { "down" };
+        Self::ip(&["-n", &self.bridge, "link", "set", &format!("vb{i}"), state]).unwrap();
+    }
+
+    /// `naofarm ARGS` on host `i` (1-based).
+    fn naofarm(&self, i: usize) -> Command {
+        let mut c = Command::new("ip");
+        c.args([
+            "netns",
+            "exec",
+            &self.hosts[i - 1],
+            env!("CARGO_BIN_EXE_naofarm"),
+        ]);
+        c
+    }
+}
+
+impl Drop for Hosts {
+    fn drop(&mut self) {
+        for h in self.hosts.iter().chain(std::iter::once(&self.bridge)) {
+            let _ = Self::ip(&["netns", "del", h]);
+        }
+    }
+}
+
+/// Decided iterations in a `--json` stdout file so far.
+fn decided_so_far(stdout: &Path) -> usize {
+    std::fs::read_to_string(stdout)
+        .unwrap_or_default()
+        .lines()
+        .filter(|l| l.contains("\"event\":\"decided\""))
+        .count()
+}
+
+fn wait_decided(stdout: &Path, n: usize) {
+    let deadline = Instant::now() + TIMEOUT;
+    while decided_so_far(stdout) < n {
+        assert!(
+            Instant::now() < deadline,
+            "the run never decided {n} iterations"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// Router, coordinator and three workers on five hosts (network namespaces
+/// joined by a bridge), every link mutual TLS; one worker's link is cut for
+/// good mid-run, another's cut and healed: the run completes with the
+/// history of the run alone.
+#[test]
+fn a_farm_on_five_hosts_over_tls_survives_cut_links() {
+    let hosts = match Hosts::new(5) {
+        Ok(h) => h,
+        Err(why) => {
+            eprintln!(
+                "skipped: network namespaces cannot be made here ({why}); this test needs root and iproute2"
+            );
+            return;
+        }
+    };
+    let dir = scratch("fleet-netns");
+    let exp = experiment(&dir, "n.toml", "hosts", 9, 40);
+    let want = alone(&dir, &exp, "alone");
+    let pki = dir.join("pki");
+    succeed(
+        naofarm()
+            .arg("certs")
+            .arg(&pki)
+            .args(["--host", "10.77.0.1"]),
+    );
+    let ep = "tls/10.77.0.1:7447";
+    let _router = Proc::spawn(
+        hosts
+            .naofarm(1)
+            .args(["router", "--listen", ep, "--tls"])
+            .arg(&pki)
+            .stdout(Stdio::null()),
+        &dir,
+        "router",
+    );
+    let out = dir.join("run");
+    let stdout = out.with_extension("stdout");
+    let mut c = Proc::spawn(
+        hosts
+            .naofarm(2)
+            .args(["coordinator", "--json", "--connect", ep, "--tls"])
+            .arg(&pki)
+            .arg(&exp)
+            .arg("--out")
+            .arg(&out)
+            .env("RUST_LOG", "warn,naofarm_coordinator::service=info")
+            .stdout(std::fs::File::create(&stdout).unwrap()),
+        &dir,
+        "coordinator",
+    );
+    let _workers: Vec<Proc> = (3..=5)
+        .map(|i| {
+            Proc::spawn(
+                hosts
+                    .naofarm(i)
+                    .args([
+                        "worker",
+                        "--connect",
+                        ep,
+                        "--slots",
+                        "2",
+                        "--min-trial-ms",
+                        "250",
+                    ])
+                    .arg("--tls")
+                    .arg(&pki)
+                    .stdout(Stdio::null()),
+                &dir,
+                "worker",
+            )
+        })
+        .collect();
+    wait_decided(&stdout, 5);
+    // Host 3's link is cut for good; host 4's is cut, and healed once the
+    // run has gone on without both.
+    hosts.link(3, false);
+    hosts.link(4, false);
+    let cut_at = decided_so_far(&stdout);
+    wait_decided(&stdout, cut_at + 5);
+    hosts.link(4, true);
+    let status = wait_exit(&mut c);
+    assert!(status.success(), "{}", c.stderr());
+    assert_eq!(
+        bits(&decided(&records(&out))),
+        want,
+        "the history of the run alone"
+    );
+}
+
+/// Runs the README's Python watcher over TLS (its block as it stands, with
+/// `ep` and `pki` put in) and checks that it lists run `name`. Skipped, saying
+/// so, where the `eclipse-zenoh` Python package is not installed.
+fn python_watcher_sees(ep: &str, pki: &Path, name: &str) {
+    let has = Command::new("python3")
+        .args(["-c", "import zenoh"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !has {
+        eprintln!(
+            "skipped the Python watcher: python3 has no `zenoh` module (pip install eclipse-zenoh)"
+        );
+        return;
+    }
+    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
+    let block = readme
+        .split("```python\n")
+        .map(|b| b.split("```").next().unwrap())
+        .find(|b| b.contains("watcher.pem"))
+        .expect("the README's TLS Python watcher");
+    let script = block.replace("tls/10.0.0.1:7447", ep).replace(
+        "pki = \"pki\"",
+        &format!("pki = {:?}", pki.display().to_string()),
+    );
+    let out = Command::new("timeout")
+        .args(["60", "python3", "-c", &script])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success() && stdout.lines().any(|l| l.starts_with(&format!("{name} "))),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }

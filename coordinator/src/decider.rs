@@ -128,6 +128,16 @@ pub enum Cmd {
         /// Handed back with the reply (which query to answer).
         tag: u64,
     },
+    /// Journal the run's worker fingerprint (before any outcome of its
+    /// workers: commands are applied in order). No reply unless it fails.
+    Fingerprint {
+        /// The fingerprint.
+        fingerprint: u64,
+        /// The pinning worker's naofarm version.
+        version: String,
+        /// The pinning worker.
+        worker: String,
+    },
 }
 
 /// The run's answers, in the order of the commands.
@@ -249,6 +259,14 @@ fn serve(
             }
         }
         let reply = match cmd {
+            Cmd::Fingerprint {
+                fingerprint,
+                version,
+                worker,
+            } => match run.pin_fingerprint(fingerprint, &version, &worker) {
+                Ok(()) => continue,
+                Err(e) => Reply::Fatal(e),
+            },
             Cmd::Outcome(o) => {
                 let clock = Instant::now();
                 match run.on_outcome(o.iteration, o.trial, o.seed, o.measurement(), &o.worker) {
@@ -320,6 +338,8 @@ pub struct Facts {
     pub failed: std::collections::BTreeMap<(u64, u32), BTreeSet<String>>,
     /// Trials pending (opened, no outcome yet).
     pub pending: BTreeSet<(u64, u32)>,
+    /// The journaled fingerprint of the run's workers (a resumed run's), if any.
+    pub fingerprint: Option<u64>,
 }
 
 impl Facts {
@@ -343,6 +363,7 @@ impl Facts {
             id: run.id().to_string(),
             failed,
             pending,
+            fingerprint: run.fingerprint(),
         }
     }
 }

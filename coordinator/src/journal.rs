@@ -112,6 +112,18 @@ pub enum Record {
         /// Whether a serving session starts here.
         start: bool,
     },
+    /// The fingerprint of the workers whose outcomes make this run's history
+    /// (their build and their host's maths, `worker::fingerprint`): pinned by
+    /// the first worker the run grants trials to, journaled before any
+    /// outcome of it; from then on only workers of this fingerprint serve it.
+    Fingerprint {
+        /// The fingerprint.
+        fingerprint: u64,
+        /// naofarm version of the worker that pinned it.
+        version: String,
+        /// That worker's id.
+        worker: String,
+    },
 }
 
 impl Record {

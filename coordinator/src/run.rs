@@ -103,6 +103,8 @@ pub struct Run {
     id: String,
     priority: u32,
     paused: bool,
+    /// The journaled fingerprint of the workers that serve the run.
+    fingerprint: Option<u64>,
     _lock: RunLock,
 }
 
@@ -269,6 +271,7 @@ impl Run {
             id,
             priority: 1,
             paused: false,
+            fingerprint: None,
             _lock: lock,
         };
         let effects = run.act(actions)?;
@@ -321,6 +324,7 @@ impl Run {
         let mut failures: BTreeMap<(u64, u32), Vec<(String, String)>> = BTreeMap::new();
         let mut id = None;
         let (mut priority, mut paused) = (1, false);
+        let mut fingerprint = None;
         for rec in records.into_iter().skip(1) {
             match rec {
                 Record::Header { .. } => {
@@ -331,6 +335,9 @@ impl Run {
                     })
                 }
                 Record::Extended { .. } | Record::Clock { .. } => {}
+                Record::Fingerprint { fingerprint: f, .. } => {
+                    fingerprint = fingerprint.or(Some(f));
+                }
                 Record::Identity { id: i } => id = id.or(Some(i)),
                 Record::Control { action, .. } => match action {
                     Control::Pause => paused = true,
@@ -380,6 +387,7 @@ impl Run {
             id: String::new(),
             priority,
             paused,
+            fingerprint,
             _lock: lock,
         };
         // A journal older than run ids gets one now, kept from then on.
@@ -448,6 +456,31 @@ impl Run {
     #[must_use]
     pub fn paused(&self) -> bool {
         self.paused
+    }
+
+    /// The fingerprint of the workers that serve the run, once pinned (journaled).
+    #[must_use]
+    pub fn fingerprint(&self) -> Option<u64> {
+        self.fingerprint
+    }
+
+    /// Pins the run's worker fingerprint (journaled, one fsync) if none is yet.
+    pub fn pin_fingerprint(
+        &mut self,
+        fingerprint: u64,
+        version: &str,
+        worker: &str,
+    ) -> Result<(), RunError> {
+        if self.fingerprint.is_some() {
+            return Ok(());
+        }
+        self.journal.append(&Record::Fingerprint {
+            fingerprint,
+            version: version.to_string(),
+            worker: worker.to_string(),
+        })?;
+        self.fingerprint = Some(fingerprint);
+        Ok(())
     }
 
     /// Journals a control action and applies it (a no-op change is not journaled).

@@ -149,6 +149,16 @@ pub enum ServiceError {
         /// The run id.
         id: String,
     },
+    /// A resumed run met workers, and none has the fingerprint its history was made with.
+    #[error("run {id}: its history was made by workers of fingerprint {ours}, and every worker here has another ({theirs}): their trials might not give the same bits (another naofarm build, or another CPU's maths); start workers of this build on such hosts, or start the run afresh")]
+    NoMatchingWorker {
+        /// The run id.
+        id: String,
+        /// The run's journaled fingerprint.
+        ours: String,
+        /// The workers' fingerprints, with their ids.
+        theirs: String,
+    },
 }
 
 fn zerr(e: impl std::fmt::Display) -> ServiceError {
@@ -188,6 +198,16 @@ struct State {
     bad: HashMap<String, u32>,
     /// (source, reason) pairs already logged.
     logged: std::collections::HashSet<(String, String)>,
+    /// The fingerprint of the workers that serve the run (pinned by the
+    /// first that asks, or journaled), and whether it came from the journal.
+    fingerprint: Option<u64>,
+    journaled_fingerprint: bool,
+    /// Whether a worker of the run's fingerprint asked in this session.
+    matched: bool,
+    /// Workers that asked with another fingerprint: id → fingerprint.
+    mismatched: BTreeMap<String, u64>,
+    /// Workers whose liveliness tokens are up.
+    live: std::collections::BTreeSet<String>,
 }
 
 impl State {
@@ -380,6 +400,7 @@ pub async fn serve(
         live: session
             .liveliness()
             .declare_subscriber(keys::workers_all(&prefix))
+            .history(true)
             .await
             .map_err(zerr)?,
         work_q: queryable(fkeys.work()).await?,
@@ -404,6 +425,7 @@ pub async fn serve(
         .collect();
     let effects = decider::effects(&run, effects);
     let facts = Facts::of(&run);
+    let pinned = facts.fingerprint;
     let snap = Snapshot::of(&run);
     let Decider {
         tx,
@@ -431,6 +453,11 @@ pub async fn serve(
         trials_done: 0,
         bad: HashMap::new(),
         logged: std::collections::HashSet::new(),
+        journaled_fingerprint: pinned.is_some(),
+        fingerprint: pinned,
+        matched: false,
+        mismatched: BTreeMap::new(),
+        live: std::collections::BTreeSet::new(),
     };
     if let Some(tx) = &events {
         let _ = tx.send(Event::Started(st.history.clone(), Box::new(st.status())));
@@ -540,14 +567,18 @@ async fn serve_loop(
             }
             s = subs.live.recv_async() => {
                 let s = s.map_err(zerr)?;
+                let wid = keys::last_chunk(s.key_expr().as_str()).to_string();
                 if s.kind() == SampleKind::Delete {
-                    let wid = keys::last_chunk(s.key_expr().as_str()).to_string();
+                    st.live.remove(&wid);
                     st.gone.push((wid, Instant::now()));
+                    no_worker_fits(st)?;
+                } else {
+                    st.live.insert(wid);
                 }
             }
             q = subs.work_q.recv_async() => {
                 let q = q.map_err(zerr)?;
-                on_work(st, &q).await;
+                on_work(st, &q).await?;
             }
             q = subs.ctl_q.recv_async() => {
                 let q = q.map_err(zerr)?;
@@ -636,26 +667,105 @@ fn on_failure(st: &mut State, f: &TrialFailure) -> Result<(), ServiceError> {
 }
 
 /// A worker asks for trials: grant up to its free slots, in one reply that only it receives.
-async fn on_work(st: &mut State, q: &zenoh::query::Query) {
+/// Whether `req`'s worker may run this run's trials: the run's fingerprint
+/// is pinned by the first worker that asks (journaled before any of its
+/// outcomes), and from then on only workers of that fingerprint get trials.
+/// A resumed run that meets only workers of other fingerprints ends.
+fn fingerprint_fits(st: &mut State, req: &WorkRequest) -> Result<Option<String>, ServiceError> {
+    let ours = match st.fingerprint {
+        Some(f) => f,
+        None => {
+            st.fingerprint = Some(req.fingerprint);
+            tracing::info!(worker = %req.worker, fingerprint = %show_fp(req.fingerprint), version = %req.version, "the run's worker fingerprint is pinned");
+            st.send(Cmd::Fingerprint {
+                fingerprint: req.fingerprint,
+                version: req.version.clone(),
+                worker: req.worker.clone(),
+            })?;
+            req.fingerprint
+        }
+    };
+    if req.fingerprint == ours {
+        st.matched = true;
+        return Ok(None);
+    }
+    let why = format!(
+        "fingerprint: this run's trials are run by workers of fingerprint {}; this worker's is {} (naofarm {}): its bits might differ",
+        show_fp(ours),
+        show_fp(req.fingerprint),
+        req.version
+    );
+    st.refuse(&req.worker, "work request of another worker fingerprint");
+    if st
+        .mismatched
+        .insert(req.worker.clone(), req.fingerprint)
+        .is_none()
+    {
+        tracing::warn!(worker = %req.worker, "{why}");
+    }
+    no_worker_fits(st)?;
+    Ok(Some(why))
+}
+
+/// A resumed run whose every live worker asked with another fingerprint
+/// than the journaled one (and none with it) ends at once: its history
+/// could not go on with the same bits.
+fn no_worker_fits(st: &State) -> Result<(), ServiceError> {
+    let Some(ours) = st.fingerprint else {
+        return Ok(());
+    };
+    if st.journaled_fingerprint
+        && !st.matched
+        && !st.mismatched.is_empty()
+        && st.live.iter().all(|w| st.mismatched.contains_key(w))
+    {
+        let theirs = st
+            .mismatched
+            .iter()
+            .map(|(w, f)| format!("{} on worker {w}", show_fp(*f)))
+            .collect::<Vec<_>>()
+            .join(", ");
+        return Err(ServiceError::NoMatchingWorker {
+            id: st.facts.id.clone(),
+            ours: show_fp(ours),
+            theirs,
+        });
+    }
+    Ok(())
+}
+
+/// A fingerprint as shown and logged: 16 hex digits (as `worker::fingerprint::show`).
+fn show_fp(f: u64) -> String {
+    format!("{f:016x}")
+}
+
+async fn on_work(st: &mut State, q: &zenoh::query::Query) -> Result<(), ServiceError> {
     st.counters.work_requests += 1;
     let Some(payload) = q.payload() else {
         st.refuse("a query without payload", "work request: empty");
         reply_err(q, "a work request needs a WorkRequest payload").await;
-        return;
+        return Ok(());
     };
     let req = match WorkRequest::decode(&payload.to_bytes()) {
         Ok(r) => r,
         Err(e) => {
             st.refuse("an undecodable message", &format!("work request: {e}"));
             reply_err(q, &e.to_string()).await;
-            return;
+            return Ok(());
         }
     };
     let state = st.state();
-    let exp = &st.facts.experiment;
     let mut note = None;
     let mut trials = Vec::new();
-    if state != RunState::Running {
+    let misfit = if state == RunState::Running {
+        fingerprint_fits(st, &req)?
+    } else {
+        None
+    };
+    let exp = &st.facts.experiment;
+    if let Some(why) = misfit {
+        note = Some(why);
+    } else if state != RunState::Running {
         note = Some(format!("the run is {state:?}").to_lowercase());
     } else if exp.trial_duration_s > req.max_duration_s {
         note = Some(format!(
@@ -726,6 +836,7 @@ async fn on_work(st: &mut State, q: &zenoh::query::Query) {
         }
         Err(e) => tracing::error!(error = %e, "a work grant cannot be encoded"),
     }
+    Ok(())
 }
 
 /// `naofarm ctl`: pause, resume, stop, priority; the run's thread journals
@@ -896,6 +1007,14 @@ fn plausible(o: &TrialOutcome, duration_s: f64) -> Result<(), String> {
 
 fn on_outcome(st: &mut State, o: TrialOutcome) -> Result<(), ServiceError> {
     let t = (o.iteration, o.trial);
+    if st.fingerprint.is_some_and(|f| f != o.fingerprint) {
+        // Never journaled: the run's bits come from workers of one fingerprint.
+        st.refuse(&o.worker, "outcome of another worker fingerprint");
+        if st.sched.holder(t) == Some(o.worker.as_str()) {
+            st.failed(t, &o.worker, "answered with another worker fingerprint")?;
+        }
+        return Ok(());
+    }
     let answer = st.sched.answered(t, &o.worker, o.dispatch, Instant::now());
     if answer == Answer::WrongDispatch {
         // The holder answered under another id: it misbehaves; the trial fails on it.

@@ -15,7 +15,7 @@ use crate::{
 };
 
 /// Version of the envelope and message layout.
-pub const WIRE_VERSION: u8 = 2;
+pub const WIRE_VERSION: u8 = 3;
 /// Largest message accepted, in bytes (checked before any allocation).
 pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
 const MAGIC: [u8; 2] = *b"NF";
@@ -296,12 +296,22 @@ pub struct TrialOutcome {
     pub sim_time_s: f64,
     /// Wall-clock time the trial took on the worker, s.
     pub wall_time_s: f64,
+    /// The worker's fingerprint (its build and its host's maths: see
+    /// `worker::fingerprint`); a run takes outcomes of one fingerprint only.
+    pub fingerprint: u64,
 }
 
 impl TrialOutcome {
-    /// The answer to `req`: what `worker` measured, in `wall_time_s` of wall time.
+    /// The answer to `req`: what `worker` (of `fingerprint`) measured, in
+    /// `wall_time_s` of wall time.
     #[must_use]
-    pub fn answer(req: &TrialRequest, worker: String, m: Measurement, wall_time_s: f64) -> Self {
+    pub fn answer(
+        req: &TrialRequest,
+        worker: String,
+        fingerprint: u64,
+        m: Measurement,
+        wall_time_s: f64,
+    ) -> Self {
         Self {
             run: req.run.clone(),
             iteration: req.iteration,
@@ -315,6 +325,7 @@ impl TrialOutcome {
             fall_time_s: m.fall_time_s,
             sim_time_s: m.sim_time_s,
             wall_time_s,
+            fingerprint,
         }
     }
 
@@ -549,6 +560,8 @@ pub struct WorkRequest {
     pub max_duration_s: f64,
     /// naofarm version of the worker.
     pub version: String,
+    /// The worker's fingerprint: a run grants trials only to workers of its own.
+    pub fingerprint: u64,
 }
 
 impl WireMessage for WorkRequest {
@@ -794,9 +807,9 @@ mod tests {
 
         #[test]
         fn trial_outcome_round_trips(run in run(), i in any::<u64>(), k in any::<u32>(), fell in any::<bool>(),
-                                     x in -100.0f64..100.0, y in -100.0f64..100.0, t in 0.0f64..10.0) {
+                                     x in -100.0f64..100.0, y in -100.0f64..100.0, t in 0.0f64..10.0, f in any::<u64>()) {
             let m = TrialOutcome { run, iteration: i, trial: k, seed: 7, dispatch: 1, worker: "w".into(), fell,
-                                   x_m: x, y_m: y, fall_time_s: fell.then_some(t), sim_time_s: t, wall_time_s: 0.5 };
+                                   x_m: x, y_m: y, fall_time_s: fell.then_some(t), sim_time_s: t, wall_time_s: 0.5, fingerprint: f };
             prop_assert_eq!(TrialOutcome::decode(&m.encode().unwrap()), Ok(m));
         }
 
@@ -835,7 +848,7 @@ mod tests {
         fn fleet_messages_round_trip(w in run(), slots in 1u32..64, p in 1u32..1000, ready in any::<u32>(), seq in any::<u64>()) {
             let ad = RunAdvert { id: format!("{w}-id"), name: w.clone(), priority: p, ready, state: RunState::Paused, duration_s: 10.0, seq };
             prop_assert_eq!(RunAdvert::decode(&ad.encode().unwrap()), Ok(ad));
-            let rq = WorkRequest { worker: w.clone(), want: slots, slots, busy: 0, max_duration_s: 60.0, version: "x".into() };
+            let rq = WorkRequest { worker: w.clone(), want: slots, slots, busy: 0, max_duration_s: 60.0, version: "x".into(), fingerprint: seq };
             prop_assert_eq!(WorkRequest::decode(&rq.encode().unwrap()), Ok(rq));
             let c = ControlRequest { action: Control::Priority(p), by: w };
             prop_assert_eq!(ControlRequest::decode(&c.encode().unwrap()), Ok(c));
@@ -866,6 +879,7 @@ mod tests {
             busy: 0,
             max_duration_s: 60.0,
             version: "x".into(),
+            fingerprint: 1,
         };
         assert!(matches!(
             WorkRequest::decode(&rq.encode().unwrap()),
@@ -908,6 +922,7 @@ mod tests {
             fall_time_s: None,
             sim_time_s: 10.0,
             wall_time_s: 0.1,
+            fingerprint: 5,
         }
     }
 

@@ -51,10 +51,11 @@ pub fn ctl(run: &str, words: &[String], net: &NetArgs, timeout_s: f64) -> Result
     }
     let mut net = net.clone();
     if net.connect.is_empty() && net.config.is_none() {
-        net.connect.push("tcp/127.0.0.1:7447".into());
+        net.connect
+            .push(crate::commands::watch::default_connect(net.tls.is_some()));
     }
     let cfg = net
-        .zenoh_config_within("watcher", timeout_s)
+        .zenoh_config_within("coordinator", timeout_s)
         .map_err(Failure::Usage)?;
     let rt = runtime()?;
     rt.block_on(async {

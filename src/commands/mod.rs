@@ -18,3 +18,13 @@ pub mod stand;
 pub mod trial;
 pub mod watch;
 pub mod worker;
+
+/// `naofarm fingerprint`: this host's worker fingerprint and the version.
+pub fn fingerprint() -> Result<(), crate::common::Failure> {
+    let fp = ::worker::fingerprint::of_this_worker();
+    crate::common::emit(&format!(
+        "{} naofarm {}\n",
+        ::worker::fingerprint::show(fp),
+        env!("CARGO_PKG_VERSION")
+    ))
+}

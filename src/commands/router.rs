@@ -24,8 +24,13 @@ pub fn router(
         .map_err(Failure::Usage)?;
     cfg.insert_json5("mode", "\"router\"")
         .map_err(|e| Failure::Usage(anyhow!("mode: {e}")))?;
-    if net.tls.is_some() && config.is_none() {
-        // Roles by certificate common name: what the ACL denies never reaches naofarm.
+    // A configuration file may bring its own access control; otherwise
+    // --tls enforces the roles by certificate common name (what the ACL
+    // denies never reaches naofarm).
+    let own_acl = cfg
+        .get_json("access_control/enabled")
+        .is_ok_and(|v| v.trim() == "true");
+    if net.tls.is_some() && !own_acl {
         cfg.insert_json5("access_control", &crate::net::acl(&net.prefix))
             .map_err(|e| Failure::Usage(anyhow!("access control: {e}")))?;
     }

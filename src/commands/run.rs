@@ -16,6 +16,7 @@ pub fn run(
     workers: Option<u32>,
     json: bool,
     listen: Option<&str>,
+    tls: Option<std::path::PathBuf>,
 ) -> Result<(), Failure> {
     let n = workers.unwrap_or_else(|| {
         std::thread::available_parallelism()
@@ -28,24 +29,31 @@ pub fn run(
             "--workers {n}: must be in 1..=1024"
         )));
     }
+    let scheme = if tls.is_some() { "tls" } else { "tcp" };
     let endpoint = match listen {
-        Some(e) if e.starts_with("tcp/127.") || e.starts_with("tcp/[::1]") => e.to_string(),
+        Some(e)
+            if e.starts_with(&format!("{scheme}/127."))
+                || e.starts_with(&format!("{scheme}/[::1]")) =>
+        {
+            e.to_string()
+        }
         Some(e) => {
             return Err(Failure::Usage(anyhow!(
-                "--listen `{e}`: `run` serves on loopback only (tcp/127.0.0.1:PORT); use `coordinator` and `worker` for a cluster"
+                "--listen `{e}`: `run` serves on loopback only ({scheme}/127.0.0.1:PORT); use `coordinator` and `worker` for a cluster"
             )))
         }
         // A port the OS picks, read back from the session.
-        None => "tcp/127.0.0.1:0".to_string(),
+        None => format!("{scheme}/127.0.0.1:0"),
     };
     let coord_net = NetArgs {
         listen: vec![endpoint],
         prefix: protocol::keys::DEFAULT_PREFIX.to_string(),
+        tls: tls.clone(),
         ..NetArgs::default()
     };
     let ccfg = coord_net
         .zenoh_config("coordinator", &[])
-        .map_err(Failure::Job)?;
+        .map_err(Failure::Usage)?;
     let (run, effects) = open_run(job)?;
     let rt = runtime()?;
     rt.block_on(async {
@@ -56,15 +64,19 @@ pub fn run(
             .await
             .into_iter()
             .map(|l| l.to_string())
-            .find(|l| l.starts_with("tcp/127."))
+            .find(|l| l.starts_with(&format!("{scheme}/127.")))
             .ok_or_else(|| Failure::Job(anyhow!("the session listens on no loopback endpoint")))?;
-        eprintln!("zenoh on {endpoint}; watch from another terminal with `naofarm watch RUN --connect {endpoint}`");
+        let tls_flag = tls
+            .as_ref()
+            .map(|d| format!(" --tls {}", d.display()))
+            .unwrap_or_default();
+        eprintln!("zenoh on {endpoint}; watch from another terminal with `naofarm watch RUN --connect {endpoint}{tls_flag}`");
         let worker_net = NetArgs {
             connect: vec![endpoint],
             listen: vec![],
             prefix: protocol::keys::DEFAULT_PREFIX.to_string(),
             config: None,
-            tls: None,
+            tls,
         };
         let shutdown = signals();
         let mut handles = Vec::new();

@@ -4,7 +4,8 @@
 //! [`synthetic`] (a cheap stand-in model for tests and farm benchmarks),
 //! [`service`] (the zenoh worker), [`share`] (which run gets a free slot:
 //! fair shares by priority), [`fault`] (run-time fault hooks for tests),
-//! [`noise`] (the seeded noise both models draw from).
+//! [`noise`] (the seeded noise both models draw from), [`fingerprint`] (the
+//! hash of probe trials that tells workers of the same bits).
 //! [`run_trial`] is the one trial interface, a pure function of the request.
 //!
 //! This crate must not keep state between trials or decide anything about
@@ -12,6 +13,7 @@
 #![warn(missing_docs)]
 
 pub mod fault;
+pub mod fingerprint;
 pub mod nao;
 pub mod noise;
 pub mod service;

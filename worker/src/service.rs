@@ -96,6 +96,9 @@ pub enum WorkerError {
     /// Zenoh failed.
     #[error("zenoh: {0}")]
     Zenoh(String),
+    /// The fingerprint's probe trials could not run.
+    #[error("the fingerprint's probe: {0}")]
+    Probe(String),
 }
 
 fn zerr(e: impl std::fmt::Display) -> WorkerError {
@@ -212,6 +215,10 @@ pub async fn serve(
 ) -> Result<WorkerSummary, WorkerError> {
     let id = uuid::Uuid::new_v4().to_string();
     let prefix = cfg.prefix.clone();
+    // The probe trials run before the worker says it exists.
+    let fingerprint = tokio::task::spawn_blocking(crate::fingerprint::of_this_worker)
+        .await
+        .map_err(|e| WorkerError::Probe(e.to_string()))?;
     let adverts = session
         .declare_subscriber(keys::adverts_all(&prefix))
         .await
@@ -221,7 +228,7 @@ pub async fn serve(
         .declare_token(keys::worker(&prefix, &id))
         .await
         .map_err(zerr)?;
-    tracing::info!(worker = %id, slots = cfg.slots, "worker ready");
+    tracing::info!(worker = %id, slots = cfg.slots, fingerprint = %crate::fingerprint::show(fingerprint), "worker ready");
     let mut share = Share::new();
     let mut held: BTreeMap<Held, TrialRequest> = BTreeMap::new();
     let mut asking: u32 = 0;
@@ -249,8 +256,13 @@ pub async fn serve(
                     asking -= asked;
                     let (trials, ready) = match grant {
                         Ok(g) => {
-                            if let Some(note) = &g.note {
-                                tracing::debug!(run, note, "short grant");
+                            match &g.note {
+                                Some(note) if note.starts_with("fingerprint") && unservable.insert(run.clone()) => {
+                                    tracing::warn!(run, note, "this worker will not serve the run");
+                                }
+                                Some(note) if note.starts_with("fingerprint") => {}
+                                Some(note) => tracing::debug!(run, note, "short grant"),
+                                None => {}
                             }
                             (g.trials, Some(g.ready))
                         }
@@ -297,7 +309,7 @@ pub async fn serve(
                     let fkeys = FleetKeys::new(&prefix, &req.run);
                     match result {
                         Ok(m) => {
-                            let mut o = TrialOutcome::answer(&req, id.clone(), m, wall);
+                            let mut o = TrialOutcome::answer(&req, id.clone(), fingerprint, m, wall);
                             crate::fault::tamper(&mut o);
                             put_message(&session, &fkeys.outcomes(), &o).await;
                             spoke.insert(req.run.clone(), Instant::now());
@@ -349,6 +361,7 @@ pub async fn serve(
                     busy,
                     max_duration_s: cfg.max_duration_s,
                     version: version.clone(),
+                    fingerprint,
                 };
                 let key = FleetKeys::new(&prefix, &run).work();
                 spoke.insert(run.clone(), Instant::now());
