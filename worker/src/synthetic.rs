@@ -36,9 +36,9 @@ pub fn trial(params: &ParamValues, seed: u64, duration_s: f64) -> Measurement {
         .sum();
     let step = params.value(Param::StepLength);
     // Speed grows with the step length and saturates; too long a step hurts balance.
-    let speed = 0.6 * (step / 0.12).min(1.2) * (-0.5 * penalty).exp();
+    let speed = 0.6 * (step / 0.12).min(1.2) * libm::exp(-0.5 * penalty);
     let step_risk = ((step - 0.12) / 0.03).max(0.0).powi(2);
-    let p_fall = 1.0 / (1.0 + (-(2.0 * (penalty + step_risk) - 4.0)).exp());
+    let p_fall = 1.0 / (1.0 + libm::exp(-(2.0 * (penalty + step_risk) - 4.0)));
     let x_clean = speed * duration_s;
     let x = x_clean * (1.0 + 0.025 * gauss(&mut rng));
     let y = x_clean * (0.04 + 0.02 * penalty.min(5.0)) * gauss(&mut rng);

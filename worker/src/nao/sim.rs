@@ -561,7 +561,7 @@ impl Sim {
                 let rel = g[joint.parent].rotation.inverse() * g[joint.child].rotation;
                 let q = rel.quaternion();
                 let twist = q.imag().dot(&Vector3::from(joint.axis));
-                out[j] = 2.0 * twist.atan2(q.w);
+                out[j] = 2.0 * libm::atan2(twist, q.w);
                 if out[j] > std::f64::consts::PI {
                     out[j] -= std::f64::consts::TAU;
                 }
@@ -705,7 +705,7 @@ impl Sim {
             foot_force_n: [self.foot_force(0), self.foot_force(1)],
             torso_position_m: [t.x, t.y, t.z],
             torso_rotation: [q.i, q.j, q.k, q.w],
-            torso_tilt_rad: up.z.clamp(-1.0, 1.0).acos(),
+            torso_tilt_rad: libm::acos(up.z.clamp(-1.0, 1.0)),
         }
     }
 

@@ -96,7 +96,7 @@ impl TravelProfile {
     #[must_use]
     pub fn at(self, s: f64) -> f64 {
         match self {
-            Self::Cosine => (1.0 - (std::f64::consts::PI * s).cos()) / 2.0,
+            Self::Cosine => (1.0 - libm::cos(std::f64::consts::PI * s)) / 2.0,
             Self::Trapezoid => {
                 let r = TRAVEL_RAMP;
                 let v = 1.0 / (1.0 - r);
@@ -162,17 +162,17 @@ fn wrap(a: f64) -> f64 {
 #[must_use]
 pub fn leg_ik_pitch_point(p: [f64; 3], leg: &Leg) -> [f64; 6] {
     let (px, py, pz) = (p[0], p[1], p[2]);
-    let q2 = py.atan2(-pz);
-    let zr = -q2.sin() * py + q2.cos() * pz;
+    let q2 = libm::atan2(py, -pz);
+    let zr = -libm::sin(q2) * py + libm::cos(q2) * pz;
     let (l1, l2, d) = (leg.thigh, leg.tibia, KNEE_FORWARD);
-    let a = l1.hypot(d);
-    let phi0 = d.atan2(l1);
+    let a = libm::hypot(l1, d);
+    let phi0 = libm::atan2(d, l1);
     let r2 = px * px + zr * zr;
     let c = ((r2 - d * d - l1 * l1 - l2 * l2) / (2.0 * l2 * a)).clamp(-1.0, 1.0);
-    let beta4 = c.acos() - phi0;
+    let beta4 = libm::acos(c) - phi0;
     let q4 = -beta4;
-    let (vx, vz) = (d - l2 * beta4.sin(), -l1 - l2 * beta4.cos());
-    let q3 = wrap(zr.atan2(px) - vz.atan2(vx));
+    let (vx, vz) = (d - l2 * libm::sin(beta4), -l1 - l2 * libm::cos(beta4));
+    let q3 = wrap(libm::atan2(zr, px) - libm::atan2(vz, vx));
     [0.0, q2, q3, q4, -(q3 + q4), -q2]
 }
 
@@ -313,7 +313,7 @@ impl Gait {
             .map(|i| self.zmp(-pad + (i as f64 - n as f64) * GRID_S))
             .collect();
         let ker: Vec<f64> = (0..=2 * n)
-            .map(|i| (-((i as f64 - n as f64).abs() * GRID_S) / tc).exp())
+            .map(|i| libm::exp(-((i as f64 - n as f64).abs() * GRID_S) / tc))
             .collect();
         let sum: f64 = ker.iter().sum();
         self.com = (0..total)
@@ -355,7 +355,7 @@ impl Gait {
             let sx = self.cfg.travel.at(s);
             let x0 = if k >= 1 { step(k - 1) } else { 0.0 };
             let x1 = step(k + 1);
-            let lift = self.p.height_lift * (1.0 - (std::f64::consts::TAU * s).cos()) / 2.0;
+            let lift = self.p.height_lift * (1.0 - libm::cos(std::f64::consts::TAU * s)) / 2.0;
             let side_y = |side: usize| if side == 0 { w } else { -w };
             feet[sup] = [step(k), side_y(sup), ANKLE_H];
             feet[sw] = [x0 + (x1 - x0) * sx, side_y(sw), ANKLE_H + lift];
