@@ -824,6 +824,7 @@ async fn on_work(st: &mut State, q: &zenoh::query::Query) -> Result<(), ServiceE
     let grant = WorkGrant {
         trials,
         ready: u32::try_from(st.sched.ready()).unwrap_or(u32::MAX),
+        seq: st.advert.0,
         state,
         note,
     };

@@ -596,6 +596,9 @@ pub struct WorkGrant {
     pub trials: Vec<TrialRequest>,
     /// Trials still ready after this grant.
     pub ready: u32,
+    /// Sequence number of the run's last advert before this grant (a
+    /// worker that heard a newer advert trusts that one on readiness).
+    pub seq: u64,
     /// Where the run stands.
     pub state: RunState,
     /// Why fewer trials than wanted, when it is not just an empty queue.

@@ -264,7 +264,7 @@ pub async fn serve(
                                 Some(note) => tracing::debug!(run, note, "short grant"),
                                 None => {}
                             }
-                            (g.trials, Some(g.ready))
+                            (g.trials, Some((g.ready, g.seq)))
                         }
                         Err(e) => {
                             tracing::debug!(run, error = %e, "no grant");

@@ -160,17 +160,28 @@ impl Share {
     }
 
     /// The run answered a request for `asked` trials with `got` (0 when the
-    /// request failed), saying `ready` more are ready (`None`: no answer). A
-    /// short answer means it has no more ready for now: the run is skipped
-    /// until its next advert.
-    pub fn granted(&mut self, run: &str, asked: u32, got: u32, ready: Option<u32>) {
+    /// request failed), saying `ready` more are ready as of its advert `seq`
+    /// (`answer`; `None`: no answer). A short answer means it has no more
+    /// ready for now: the run is skipped until an advert newer than `seq`.
+    /// A grant older than an advert already heard (the advert overtook the
+    /// reply) says nothing new about readiness: the advert stands.
+    pub fn granted(&mut self, run: &str, asked: u32, got: u32, answer: Option<(u32, u64)>) {
         if let Some(r) = self.runs.get_mut(run) {
             r.asking = r.asking.saturating_sub(asked);
             r.held += got;
-            r.ready = ready.unwrap_or_else(|| r.ready.saturating_sub(got));
-            if got < asked || r.ready == 0 {
-                r.ready = 0;
-                r.empty_until = Some(r.seq);
+            match answer {
+                Some((_, seq)) if seq < r.seq => r.ready = r.ready.saturating_sub(got),
+                Some((ready, seq)) => {
+                    r.ready = ready;
+                    if got < asked || ready == 0 {
+                        r.ready = 0;
+                        r.empty_until = Some(seq.max(r.seq));
+                    }
+                }
+                None => {
+                    r.ready = 0;
+                    r.empty_until = Some(r.seq);
+                }
             }
         }
     }
@@ -233,7 +244,7 @@ mod tests {
         for _ in 0..rounds {
             let asks = share.pick(slots, 3600.0);
             for (id, n) in &asks {
-                share.granted(id, *n, *n, Some(1_000_000));
+                share.granted(id, *n, *n, Some((1_000_000, 0)));
             }
             for (id, n) in asks {
                 for _ in 0..n {
@@ -290,7 +301,7 @@ mod tests {
             s.pick(4, 3600.0).is_empty(),
             "one request per run at a time"
         );
-        s.granted("a", 4, 1, Some(0));
+        s.granted("a", 4, 1, Some((0, 7)));
         assert!(s.pick(3, 3600.0).is_empty(), "empty until its next advert");
         s.advert(&ad("a", 1, 5, 7), now);
         assert!(
@@ -317,11 +328,11 @@ mod tests {
             let asks = s.pick(4, 3600.0);
             for (id, n) in &asks {
                 if id == "a" && round % 2 == 0 {
-                    s.granted(id, *n, 0, Some(0));
+                    s.granted(id, *n, 0, Some((0, 0)));
                     seq += 1;
                     s.advert(&ad("a", 3, 1_000_000, seq), now);
                 } else {
-                    s.granted(id, *n, *n, Some(1_000_000));
+                    s.granted(id, *n, *n, Some((1_000_000, 0)));
                     for _ in 0..*n {
                         s.done(id, 1.0);
                         *got.entry(id.clone()).or_default() += 1.0;
@@ -358,6 +369,28 @@ mod tests {
         tokio::time::advance(FORGET_AFTER + Duration::from_millis(1)).await;
         s.expire(Instant::now());
         assert_eq!(s.runs(), 0, "none heard from lately, none held");
+    }
+
+    /// The advert that says trials are ready again can overtake the reply
+    /// that said there were none (they travel apart): the run is asked again
+    /// at once, not after the next periodic advert.
+    #[tokio::test(start_paused = true)]
+    async fn a_grant_older_than_the_last_advert_does_not_idle_the_run() {
+        let mut s = Share::new();
+        let now = Instant::now();
+        s.advert(&ad("a", 1, 1, 7), now);
+        assert_eq!(s.pick(1, 3600.0), [("a".to_string(), 1)]);
+        // The coordinator ran out (grant at advert 7), then opened an
+        // iteration and advertised 8; the worker hears 8 first.
+        s.advert(&ad("a", 1, 6, 8), now);
+        s.granted("a", 1, 1, Some((0, 7)));
+        s.done("a", 0.0);
+        assert_eq!(s.pick(1, 3600.0), [("a".to_string(), 1)]);
+        // A short grant as of the newest advert idles it until a newer one.
+        s.granted("a", 1, 0, Some((0, 8)));
+        assert!(s.pick(1, 3600.0).is_empty());
+        s.advert(&ad("a", 1, 6, 9), now);
+        assert_eq!(s.pick(1, 3600.0), [("a".to_string(), 1)]);
     }
 
     #[tokio::test(start_paused = true)]
