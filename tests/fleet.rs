@@ -408,24 +408,8 @@ fn a_farm_over_mutual_tls_gives_the_local_history_and_refuses_strangers() {
         assert!(err.contains("nothing answers"), "{what}: {err}");
     }
     // The watcher's certificate sees the run.
-    let listed = succeed(
-        naofarm()
-            .args([
-                "watch",
-                "--json",
-                "--connect",
-                &ep,
-                "--timeout-s",
-                "30",
-                "--tls",
-            ])
-            .arg(&pki),
-    );
-    assert!(
-        String::from_utf8_lossy(&listed.stdout).contains("\"run\":\"tls\""),
-        "{}",
-        String::from_utf8_lossy(&listed.stdout)
-    );
+    let runs = tls_statuses(&ep, &pki, 30);
+    assert!(runs.iter().any(|r| r["run"] == "tls"), "{runs:?}");
     python_watcher_sees(&ep, &pki, "tls");
     let tls_worker = |_| {
         Proc::spawn(
@@ -644,6 +628,22 @@ fn watch_says_when_two_sessions_claim_one_run() {
     let _ = stranger.close().wait();
 }
 
+/// The statuses `naofarm watch --json` lists over TLS with the watcher's
+/// certificate from `pki` (waiting up to `timeout_s` for answers).
+fn tls_statuses(ep: &str, pki: &Path, timeout_s: u32) -> Vec<serde_json::Value> {
+    let out = succeed(
+        naofarm()
+            .args(["watch", "--json", "--connect", ep, "--timeout-s"])
+            .arg(timeout_s.to_string())
+            .arg("--tls")
+            .arg(pki),
+    );
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
 /// The fingerprint `naofarm fingerprint` prints (optionally as a worker with
 /// the fault hook that makes it report another).
 fn fingerprint(faulty: bool) -> u64 {
@@ -807,23 +807,7 @@ fn run_over_tls_lets_each_role_do_only_its_part() {
     // over TLS through the coordinator's own access control, make progress).
     let deadline = Instant::now() + TIMEOUT;
     loop {
-        let o = succeed(
-            naofarm()
-                .args([
-                    "watch",
-                    "--json",
-                    "--connect",
-                    &ep,
-                    "--timeout-s",
-                    "10",
-                    "--tls",
-                ])
-                .arg(&pki),
-        );
-        let runs: Vec<serde_json::Value> = String::from_utf8_lossy(&o.stdout)
-            .lines()
-            .map(|l| serde_json::from_str(l).unwrap())
-            .collect();
+        let runs = tls_statuses(&ep, &pki, 10);
         if runs
             .first()
             .is_some_and(|r| r["decided"].as_u64() > Some(2))

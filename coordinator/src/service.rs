@@ -140,6 +140,9 @@ pub enum ServiceError {
     /// Zenoh failed.
     #[error("zenoh: {0}")]
     Zenoh(String),
+    /// The run's thread ended without saying why (it always says why first).
+    #[error("the run's thread ended")]
+    RunEnded,
     /// A trial could not be run on any worker.
     #[error("{0}")]
     GaveUp(crate::run::GaveUp),
@@ -320,9 +323,7 @@ impl State {
     }
 
     fn send(&self, cmd: Cmd) -> Result<(), ServiceError> {
-        self.run
-            .send(cmd)
-            .map_err(|_| ServiceError::Zenoh("the run's thread ended".into()))
+        self.run.send(cmd).map_err(|_| ServiceError::RunEnded)
     }
 
     fn tag(&mut self) -> u64 {
@@ -472,6 +473,20 @@ pub async fn serve(
         events.as_ref(),
     )
     .await;
+    // The run's thread ends only after sending why (a journal that failed):
+    // that reason, not the closed channel a later command met, is the error.
+    let ended = match ended {
+        Err(ServiceError::RunEnded) => {
+            let mut why = Err(ServiceError::RunEnded);
+            while let Ok(r) = replies.try_recv() {
+                if let Reply::Fatal(e) = r {
+                    why = Err(e.into());
+                }
+            }
+            why
+        }
+        other => other,
+    };
     // Everything sent is applied and the run closed before this returns.
     let State { run, .. } = st;
     drop(run);
