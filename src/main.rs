@@ -93,7 +93,7 @@ fn dispatch(cli: Cli) -> Result<(), Failure> {
             config,
             tls,
         } => commands::router::router(&listen, config.as_deref(), tls),
-        Command::Fingerprint => commands::fingerprint(),
+        Command::Fingerprint => commands::fingerprint::fingerprint(),
         Command::Certs {
             dir,
             names,

@@ -77,11 +77,19 @@ impl NetArgs {
                     anyhow::bail!("`{e}`: with --tls every endpoint is tls/HOST:PORT");
                 }
             }
-            // A coordinator that workers and watchers reach directly (no
-            // router between) enforces the roles itself, as the router does.
+            // The roles by certificate common name, enforced by the router
+            // and by a coordinator that workers and watchers reach directly
+            // (no router between); a configuration file may bring its own.
             let listens = !self.listen.is_empty() || !default_listen.is_empty();
-            if role == "coordinator" && listens && self.connect.is_empty() && self.config.is_none()
-            {
+            let enforces = match role {
+                "router" => true,
+                "coordinator" => listens && self.connect.is_empty() && self.config.is_none(),
+                _ => false,
+            };
+            let own_acl = cfg
+                .get_json("access_control/enabled")
+                .is_ok_and(|v| v.trim() == "true");
+            if enforces && !own_acl {
                 cfg.insert_json5("access_control", &acl(&self.prefix))
                     .map_err(|e| anyhow::anyhow!("access control: {e}"))?;
             }
@@ -103,6 +111,14 @@ impl NetArgs {
         }
         Ok(cfg)
     }
+}
+
+/// Where `watch` and `ctl` connect when no endpoint or file is given: a
+/// coordinator's default listener on this host (over TLS with `--tls`).
+#[must_use]
+pub fn default_connect(tls: bool) -> String {
+    let scheme = if tls { "tls" } else { "tcp" };
+    format!("{scheme}/127.0.0.1:7447")
 }
 
 /// Opens a zenoh session (the one place every command does).

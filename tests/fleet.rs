@@ -62,13 +62,19 @@ fn router(dir: &Path) -> (Proc, String) {
 }
 
 fn coordinator(dir: &Path, exp: &Path, out: &Path, ep: &str, priority: u32) -> Proc {
+    coordinator_with(dir, exp, out, ep, &["--priority", &priority.to_string()])
+}
+
+/// A coordinator of `exp` into `out`, a client of `ep`, with `extra` flags;
+/// its `--json` lines go to `out`'s `.stdout` file.
+fn coordinator_with(dir: &Path, exp: &Path, out: &Path, ep: &str, extra: &[&str]) -> Proc {
     Proc::spawn(
         naofarm()
             .args(["coordinator", "--json", "--connect", ep])
             .arg(exp)
             .arg("--out")
             .arg(out)
-            .args(["--priority", &priority.to_string()])
+            .args(extra)
             .env("RUST_LOG", "warn,naofarm_coordinator::service=info")
             .stdout(std::fs::File::create(out.with_extension("stdout")).unwrap()),
         dir,
@@ -272,24 +278,7 @@ fn a_worker_offered_far_more_than_its_slots_holds_its_slots_and_stops_at_once() 
     std::fs::write(&exp, text).unwrap();
     let (_router, ep) = router(&dir);
     let out = dir.join("run");
-    let mut c = Proc::spawn(
-        naofarm()
-            .args([
-                "coordinator",
-                "--json",
-                "--connect",
-                &ep,
-                "--silence-s",
-                "0.5",
-            ])
-            .arg(&exp)
-            .arg("--out")
-            .arg(&out)
-            .env("RUST_LOG", "warn,naofarm_coordinator::service=info")
-            .stdout(std::fs::File::create(out.with_extension("stdout")).unwrap()),
-        &dir,
-        "coordinator",
-    );
+    let mut c = coordinator_with(&dir, &exp, &out, &ep, &["--silence-s", "0.5"]);
     // Trials of a minute: the worker holds its two and heartbeats every 0.1 s.
     let mut slow = worker(&dir, &ep, 2, 60_000, &["--heartbeat-ms", "100"]);
     let deadline = Instant::now() + TIMEOUT;
@@ -718,23 +707,7 @@ fn a_run_takes_one_worker_fingerprint_and_a_resume_without_it_ends() {
     // Resumed (extended) where only workers of another fingerprint serve:
     // it says so and exits 1 instead of waiting; its history is kept.
     let before = std::fs::read(out.join("journal.nfj")).unwrap();
-    let mut c2 = Proc::spawn(
-        naofarm()
-            .args([
-                "coordinator",
-                "--json",
-                "--connect",
-                &ep,
-                "--iterations",
-                "12",
-            ])
-            .arg(&exp)
-            .arg("--out")
-            .arg(&out)
-            .stdout(Stdio::null()),
-        &dir,
-        "coordinator",
-    );
+    let mut c2 = coordinator_with(&dir, &exp, &out, &ep, &["--iterations", "12"]);
     let _faulty2 = Proc::spawn(
         naofarm()
             .args(["worker", "--connect", &ep, "--slots", "2"])

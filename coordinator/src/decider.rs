@@ -338,7 +338,8 @@ pub struct Facts {
     pub failed: std::collections::BTreeMap<(u64, u32), BTreeSet<String>>,
     /// Trials pending (opened, no outcome yet).
     pub pending: BTreeSet<(u64, u32)>,
-    /// The journaled fingerprint of the run's workers (a resumed run's), if any.
+    /// The fingerprint of the run's workers: the journaled one (a resumed
+    /// run's), then the one the service pins for the run's first asker.
     pub fingerprint: Option<u64>,
 }
 

@@ -24,8 +24,8 @@ use tokio::time::Instant;
 use protocol::{
     keys::{self, FleetKeys, RunKeys},
     wire::{
-        Control, ControlRequest, IterationResult, RunAdvert, RunState, RunStatus, TrialFailure,
-        TrialOutcome, WireMessage, WorkGrant, WorkRequest, WorkerPresence,
+        show_fingerprint, Control, ControlRequest, IterationResult, RunAdvert, RunState, RunStatus,
+        TrialFailure, TrialOutcome, WireMessage, WorkGrant, WorkRequest, WorkerPresence,
     },
 };
 use zenoh::{bytes::Encoding, sample::SampleKind, Session};
@@ -201,9 +201,8 @@ struct State {
     bad: HashMap<String, u32>,
     /// (source, reason) pairs already logged.
     logged: std::collections::HashSet<(String, String)>,
-    /// The fingerprint of the workers that serve the run (pinned by the
-    /// first that asks, or journaled), and whether it came from the journal.
-    fingerprint: Option<u64>,
+    /// Whether the run's worker fingerprint (`facts.fingerprint`) came from
+    /// the journal (a resumed run) rather than from this session's first asker.
     journaled_fingerprint: bool,
     /// Whether a worker of the run's fingerprint asked in this session.
     matched: bool,
@@ -426,7 +425,7 @@ pub async fn serve(
         .collect();
     let effects = decider::effects(&run, effects);
     let facts = Facts::of(&run);
-    let pinned = facts.fingerprint;
+    let journaled_fingerprint = facts.fingerprint.is_some();
     let snap = Snapshot::of(&run);
     let Decider {
         tx,
@@ -454,8 +453,7 @@ pub async fn serve(
         trials_done: 0,
         bad: HashMap::new(),
         logged: std::collections::HashSet::new(),
-        journaled_fingerprint: pinned.is_some(),
-        fingerprint: pinned,
+        journaled_fingerprint,
         matched: false,
         mismatched: BTreeMap::new(),
         live: std::collections::BTreeSet::new(),
@@ -681,17 +679,16 @@ fn on_failure(st: &mut State, f: &TrialFailure) -> Result<(), ServiceError> {
     Ok(())
 }
 
-/// A worker asks for trials: grant up to its free slots, in one reply that only it receives.
 /// Whether `req`'s worker may run this run's trials: the run's fingerprint
 /// is pinned by the first worker that asks (journaled before any of its
 /// outcomes), and from then on only workers of that fingerprint get trials.
 /// A resumed run that meets only workers of other fingerprints ends.
 fn fingerprint_fits(st: &mut State, req: &WorkRequest) -> Result<Option<String>, ServiceError> {
-    let ours = match st.fingerprint {
+    let ours = match st.facts.fingerprint {
         Some(f) => f,
         None => {
-            st.fingerprint = Some(req.fingerprint);
-            tracing::info!(worker = %req.worker, fingerprint = %show_fp(req.fingerprint), version = %req.version, "the run's worker fingerprint is pinned");
+            st.facts.fingerprint = Some(req.fingerprint);
+            tracing::info!(worker = %req.worker, fingerprint = %show_fingerprint(req.fingerprint), version = %req.version, "the run's worker fingerprint is pinned");
             st.send(Cmd::Fingerprint {
                 fingerprint: req.fingerprint,
                 version: req.version.clone(),
@@ -706,8 +703,8 @@ fn fingerprint_fits(st: &mut State, req: &WorkRequest) -> Result<Option<String>,
     }
     let why = format!(
         "fingerprint: this run's trials are run by workers of fingerprint {}; this worker's is {} (naofarm {}): its bits might differ",
-        show_fp(ours),
-        show_fp(req.fingerprint),
+        show_fingerprint(ours),
+        show_fingerprint(req.fingerprint),
         req.version
     );
     st.refuse(&req.worker, "work request of another worker fingerprint");
@@ -726,7 +723,7 @@ fn fingerprint_fits(st: &mut State, req: &WorkRequest) -> Result<Option<String>,
 /// than the journaled one (and none with it) ends at once: its history
 /// could not go on with the same bits.
 fn no_worker_fits(st: &State) -> Result<(), ServiceError> {
-    let Some(ours) = st.fingerprint else {
+    let Some(ours) = st.facts.fingerprint else {
         return Ok(());
     };
     if st.journaled_fingerprint
@@ -737,23 +734,19 @@ fn no_worker_fits(st: &State) -> Result<(), ServiceError> {
         let theirs = st
             .mismatched
             .iter()
-            .map(|(w, f)| format!("{} on worker {w}", show_fp(*f)))
+            .map(|(w, f)| format!("{} on worker {w}", show_fingerprint(*f)))
             .collect::<Vec<_>>()
             .join(", ");
         return Err(ServiceError::NoMatchingWorker {
             id: st.facts.id.clone(),
-            ours: show_fp(ours),
+            ours: show_fingerprint(ours),
             theirs,
         });
     }
     Ok(())
 }
 
-/// A fingerprint as shown and logged: 16 hex digits (as `worker::fingerprint::show`).
-fn show_fp(f: u64) -> String {
-    format!("{f:016x}")
-}
-
+/// A worker asks for trials: grant up to its free slots, in one reply that only it receives.
 async fn on_work(st: &mut State, q: &zenoh::query::Query) -> Result<(), ServiceError> {
     st.counters.work_requests += 1;
     let Some(payload) = q.payload() else {
@@ -1023,7 +1016,7 @@ fn plausible(o: &TrialOutcome, duration_s: f64) -> Result<(), String> {
 
 fn on_outcome(st: &mut State, o: TrialOutcome) -> Result<(), ServiceError> {
     let t = (o.iteration, o.trial);
-    if st.fingerprint.is_some_and(|f| f != o.fingerprint) {
+    if st.facts.fingerprint.is_some_and(|f| f != o.fingerprint) {
         // Never journaled: the run's bits come from workers of one fingerprint.
         st.refuse(&o.worker, "outcome of another worker fingerprint");
         if st.sched.holder(t) == Some(o.worker.as_str()) {

@@ -545,6 +545,12 @@ impl WireMessage for RunAdvert {
     }
 }
 
+/// A worker fingerprint as it is shown, logged and named in errors: 16 hex digits.
+#[must_use]
+pub fn show_fingerprint(fp: u64) -> String {
+    format!("{fp:016x}")
+}
+
 /// A worker asking a run for trials (the payload of a query on `<prefix>/@runs/<id>/work`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct WorkRequest {

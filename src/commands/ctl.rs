@@ -52,7 +52,7 @@ pub fn ctl(run: &str, words: &[String], net: &NetArgs, timeout_s: f64) -> Result
     let mut net = net.clone();
     if net.connect.is_empty() && net.config.is_none() {
         net.connect
-            .push(crate::commands::watch::default_connect(net.tls.is_some()));
+            .push(crate::net::default_connect(net.tls.is_some()));
     }
     let cfg = net
         .zenoh_config_within("coordinator", timeout_s)

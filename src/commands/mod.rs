@@ -8,6 +8,7 @@ pub mod check;
 pub mod clop;
 pub mod coordinator;
 pub mod ctl;
+pub mod fingerprint;
 pub mod history;
 pub mod journal;
 pub mod model;
@@ -18,13 +19,3 @@ pub mod stand;
 pub mod trial;
 pub mod watch;
 pub mod worker;
-
-/// `naofarm fingerprint`: this host's worker fingerprint and the version.
-pub fn fingerprint() -> Result<(), crate::common::Failure> {
-    let fp = ::worker::fingerprint::of_this_worker();
-    crate::common::emit(&format!(
-        "{} naofarm {}\n",
-        ::worker::fingerprint::show(fp),
-        env!("CARGO_PKG_VERSION")
-    ))
-}

@@ -24,16 +24,6 @@ pub fn router(
         .map_err(Failure::Usage)?;
     cfg.insert_json5("mode", "\"router\"")
         .map_err(|e| Failure::Usage(anyhow!("mode: {e}")))?;
-    // A configuration file may bring its own access control; otherwise
-    // --tls enforces the roles by certificate common name (what the ACL
-    // denies never reaches naofarm).
-    let own_acl = cfg
-        .get_json("access_control/enabled")
-        .is_ok_and(|v| v.trim() == "true");
-    if net.tls.is_some() && !own_acl {
-        cfg.insert_json5("access_control", &crate::net::acl(&net.prefix))
-            .map_err(|e| Failure::Usage(anyhow!("access control: {e}")))?;
-    }
     let rt = runtime()?;
     rt.block_on(async {
         let session = open_session(cfg).await?;

@@ -19,14 +19,6 @@ use crate::{
     view::View,
 };
 
-/// Where a watcher connects when nothing is given: a coordinator's default.
-/// Where `watch` and `ctl` connect by default: a coordinator on this host
-/// (over TLS with `--tls`).
-pub fn default_connect(tls: bool) -> String {
-    let scheme = if tls { "tls" } else { "tcp" };
-    format!("{scheme}/127.0.0.1:7447")
-}
-
 fn zerr(e: impl std::fmt::Display) -> Failure {
     Failure::Job(anyhow!("zenoh: {e}"))
 }
@@ -73,7 +65,8 @@ pub fn watch(a: &WatchArgs) -> Result<(), Failure> {
     }
     let mut net = a.net.clone();
     if net.connect.is_empty() && net.config.is_none() {
-        net.connect.push(default_connect(net.tls.is_some()));
+        net.connect
+            .push(crate::net::default_connect(net.tls.is_some()));
     }
     let cfg = net
         .zenoh_config_within("watcher", a.timeout_s)

@@ -72,12 +72,6 @@ pub fn of_this_worker() -> u64 {
     *FP.get_or_init(compute)
 }
 
-/// A fingerprint as it is shown and journaled: 16 hex digits.
-#[must_use]
-pub fn show(fp: u64) -> String {
-    format!("{fp:016x}")
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -85,7 +79,7 @@ mod tests {
     #[test]
     fn the_fingerprint_is_a_function_of_the_probe_bits() {
         assert_eq!(compute(), compute());
-        assert_eq!(show(0xab), "00000000000000ab");
+        assert_eq!(protocol::wire::show_fingerprint(0xab), "00000000000000ab");
         // The probes are real trials whose bits feed the hash: a probe of
         // another physics gives other bits.
         let p = &probes()[0];

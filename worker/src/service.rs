@@ -228,7 +228,7 @@ pub async fn serve(
         .declare_token(keys::worker(&prefix, &id))
         .await
         .map_err(zerr)?;
-    tracing::info!(worker = %id, slots = cfg.slots, fingerprint = %crate::fingerprint::show(fingerprint), "worker ready");
+    tracing::info!(worker = %id, slots = cfg.slots, fingerprint = %protocol::wire::show_fingerprint(fingerprint), "worker ready");
     let mut share = Share::new();
     let mut held: BTreeMap<Held, TrialRequest> = BTreeMap::new();
     let mut asking: u32 = 0;
