@@ -371,17 +371,7 @@ fn a_farm_over_mutual_tls_gives_the_local_history_and_refuses_strangers() {
     );
     assert!(err.contains("tls/HOST:PORT"), "{err}");
     let out = dir.join("run");
-    let mut c = Proc::spawn(
-        naofarm()
-            .args(["coordinator", "--json", "--connect", &ep, "--tls"])
-            .arg(&pki)
-            .arg(&exp)
-            .arg("--out")
-            .arg(&out)
-            .stdout(std::fs::File::create(out.with_extension("stdout")).unwrap()),
-        &dir,
-        "coordinator",
-    );
+    let mut c = coordinator_with(&dir, &exp, &out, &ep, &["--tls", pki.to_str().unwrap()]);
     // No certificate, or one from another CA: no connection at all.
     for (what, tls) in [
         ("no certificate", None),
