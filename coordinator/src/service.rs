@@ -294,6 +294,13 @@ impl State {
         }
         for t in held {
             self.failed(t, id, "the worker went away while holding the trial")?;
+            // A worker whose link dropped (or that fell silent under load)
+            // did not fail the trial: it must not be set aside for it when
+            // another worker runs it (a healed worker would be idle for good,
+            // and a run whose every worker had a cut link would stall).
+            if let Some(w) = self.facts.failed.get_mut(&t) {
+                w.remove(id);
+            }
         }
         Ok(())
     }
