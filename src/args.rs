@@ -258,6 +258,11 @@ pub struct FleetBenchArgs {
     /// bench measures the farm, not the disk).
     #[arg(long)]
     pub dir: Option<std::path::PathBuf>,
+    /// Start the runs this many ms apart (0: all at once). With trials of a
+    /// fixed time, the phases the fleet's slots take at the start stay for
+    /// the whole bench (docs/fleet.md).
+    #[arg(long, default_value_t = 0)]
+    pub stagger_ms: u64,
     /// Give up after this many seconds.
     #[arg(long, default_value_t = 1800)]
     pub timeout_s: u64,

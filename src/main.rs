@@ -26,7 +26,10 @@ use common::Failure;
 
 fn main() -> ExitCode {
     let args = args::Cli::parse();
-    if matches!(args.command, Command::Coordinator { .. }) {
+    if matches!(
+        args.command,
+        Command::Coordinator { .. } | Command::Worker { .. }
+    ) {
         compact_zenoh_runtime();
     }
     tracing_subscriber::fmt()
@@ -53,10 +56,10 @@ fn main() -> ExitCode {
     }
 }
 
-/// Runs the chosen subcommand.
-/// A coordinator's zenoh work (receive, route, send) on one thread instead of
-/// five: its messages arrive one at a time, and every hop between threads is
-/// a wake-up that costs more CPU than the message (docs/fleet.md, measured).
+/// A coordinator's and a worker's zenoh work (receive, route, send) on one
+/// thread instead of five: their messages arrive one at a time, and every hop
+/// between threads is a wake-up that costs more CPU than the message
+/// (docs/fleet.md, measured). A worker's trials run on threads of their own.
 /// A `ZENOH_RUNTIME` already set is left as it is. Called before any thread starts.
 fn compact_zenoh_runtime() {
     if std::env::var_os("ZENOH_RUNTIME").is_none() {
@@ -68,6 +71,7 @@ fn compact_zenoh_runtime() {
     }
 }
 
+/// Runs the chosen subcommand.
 fn dispatch(cli: Cli) -> Result<(), Failure> {
     match cli.command {
         Command::Check { experiment, json } => commands::check::check(&experiment, json),

@@ -185,6 +185,8 @@ struct State {
     /// whether a worker got fewer trials than it wanted since (it waits for
     /// the next advert before asking again).
     advert: (u64, bool, bool),
+    /// Trials in flight as of the last advert, and when it went.
+    advertised_running: (usize, Instant),
     stopped: Option<String>,
     /// Workers whose token went, and when: their trials go back to the queue
     /// after [`GONE_GRACE`] (what they gave back on their way out counts first).
@@ -263,11 +265,13 @@ impl State {
         };
         self.advert.1 = ready > 0;
         self.advert.2 = false;
+        self.advertised_running = (self.sched.in_flight(), Instant::now());
         RunAdvert {
             id: self.facts.id.clone(),
             name: self.facts.experiment.name.clone(),
             priority: self.snap.priority,
             ready,
+            running: u32::try_from(self.sched.in_flight()).unwrap_or(u32::MAX),
             state: self.state(),
             duration_s: self.facts.experiment.trial_duration_s,
             seq: self.advert.0,
@@ -275,10 +279,21 @@ impl State {
     }
 
     /// Whether workers must hear of a change now: trials became ready, ran
-    /// out, or are ready while a worker that got a short grant waits.
+    /// out, or are ready while a worker that got a short grant waits; or,
+    /// while trials are ready, the trials in flight moved by a sixteenth of
+    /// the run's window (at least 2) since the last advert, at most every
+    /// [`ADVERT_MOVED_EVERY`]. Workers choose the run furthest below its
+    /// share by that count: a stale one keeps a run that fell behind waiting
+    /// (measured in docs/fleet.md: a run with 73 trials ready went unasked
+    /// for 450 ms while workers believed it had its window in flight).
     fn advert_due(&self) -> bool {
         let ready = self.state() == RunState::Running && self.sched.ready() > 0;
-        ready != self.advert.1 || (ready && self.advert.2)
+        let running = self.sched.in_flight();
+        let moved = ready
+            && running.abs_diff(self.advertised_running.0)
+                >= (self.advertised_running.0 / 16).max(2)
+            && self.advertised_running.1.elapsed() >= ADVERT_MOVED_EVERY;
+        ready != self.advert.1 || (ready && self.advert.2) || moved
     }
 
     /// A worker is gone (token dropped, or silent): its trials count as failed
@@ -449,6 +464,7 @@ pub async fn serve(
         rkeys,
         fkeys,
         advert: (0, false, false),
+        advertised_running: (0, Instant::now()),
         stopped: None,
         gone: Vec::new(),
         opened: BTreeMap::new(),
@@ -650,6 +666,10 @@ async fn serve_loop(
 /// messages may arrive after the token's end.
 pub const GONE_GRACE: Duration = Duration::from_millis(500);
 
+/// The shortest interval between two adverts sent because the trials in
+/// flight moved (bounds them to 40 a second per run).
+const ADVERT_MOVED_EVERY: Duration = Duration::from_millis(25);
+
 /// How often a run repeats its advert (workers forget a run not heard for three of these).
 pub const ADVERT_EVERY: Duration = Duration::from_secs(1);
 
@@ -839,6 +859,7 @@ async fn on_work(st: &mut State, q: &zenoh::query::Query) -> Result<(), ServiceE
     let grant = WorkGrant {
         trials,
         ready: u32::try_from(st.sched.ready()).unwrap_or(u32::MAX),
+        running: u32::try_from(st.sched.in_flight()).unwrap_or(u32::MAX),
         seq: st.advert.0,
         state,
         note,

@@ -15,7 +15,7 @@ use crate::{
 };
 
 /// Version of the envelope and message layout.
-pub const WIRE_VERSION: u8 = 3;
+pub const WIRE_VERSION: u8 = 4;
 /// Largest message accepted, in bytes (checked before any allocation).
 pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
 const MAGIC: [u8; 2] = *b"NF";
@@ -524,6 +524,9 @@ pub struct RunAdvert {
     pub priority: u32,
     /// Trials queued and ready to hand out.
     pub ready: u32,
+    /// Trials in flight on the fleet (handed out, not yet answered): with
+    /// the priority, where the run stands against its share.
+    pub running: u32,
     /// Where the run stands.
     pub state: RunState,
     /// Longest trial of the run, simulated seconds (a worker beyond its limit does not ask).
@@ -602,6 +605,8 @@ pub struct WorkGrant {
     pub trials: Vec<TrialRequest>,
     /// Trials still ready after this grant.
     pub ready: u32,
+    /// Trials in flight on the fleet after this grant.
+    pub running: u32,
     /// Sequence number of the run's last advert before this grant (a
     /// worker that heard a newer advert trusts that one on readiness).
     pub seq: u64,
@@ -855,7 +860,7 @@ mod tests {
 
         #[test]
         fn fleet_messages_round_trip(w in run(), slots in 1u32..64, p in 1u32..1000, ready in any::<u32>(), seq in any::<u64>()) {
-            let ad = RunAdvert { id: format!("{w}-id"), name: w.clone(), priority: p, ready, state: RunState::Paused, duration_s: 10.0, seq };
+            let ad = RunAdvert { id: format!("{w}-id"), name: w.clone(), priority: p, ready, running: ready, state: RunState::Paused, duration_s: 10.0, seq };
             prop_assert_eq!(RunAdvert::decode(&ad.encode().unwrap()), Ok(ad));
             let rq = WorkRequest { worker: w.clone(), want: slots, slots, busy: 0, max_duration_s: 60.0, version: "x".into(), fingerprint: seq };
             prop_assert_eq!(WorkRequest::decode(&rq.encode().unwrap()), Ok(rq));
@@ -910,6 +915,7 @@ mod tests {
             name: "n".into(),
             priority: 1001,
             ready: 1,
+            running: 0,
             state: RunState::Running,
             duration_s: 1.0,
             seq: 1,

@@ -335,6 +335,9 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
             }
         });
         coords.push((child, priority));
+        if a.stagger_ms > 0 && i + 1 < a.runs {
+            std::thread::sleep(Duration::from_millis(a.stagger_ms));
+        }
     }
     let started = Instant::now();
     drop(tx);

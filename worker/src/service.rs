@@ -229,7 +229,12 @@ pub async fn serve(
         .await
         .map_err(zerr)?;
     tracing::info!(worker = %id, slots = cfg.slots, fingerprint = %protocol::wire::show_fingerprint(fingerprint), "worker ready");
-    let mut share = Share::new();
+    let mut share = Share::new({
+        use std::hash::{Hash, Hasher};
+        let mut h = std::hash::DefaultHasher::new();
+        id.hash(&mut h);
+        h.finish()
+    });
     let mut held: BTreeMap<Held, TrialRequest> = BTreeMap::new();
     let mut asking: u32 = 0;
     let mut unservable: BTreeSet<String> = BTreeSet::new();
@@ -264,7 +269,7 @@ pub async fn serve(
                                 Some(note) => tracing::debug!(run, note, "short grant"),
                                 None => {}
                             }
-                            (g.trials, Some((g.ready, g.seq)))
+                            (g.trials, Some((g.ready, g.running, g.seq)))
                         }
                         Err(e) => {
                             tracing::debug!(run, error = %e, "no grant");
@@ -276,7 +281,7 @@ pub async fn serve(
                     for req in trials {
                         if req.run != run {
                             tracing::warn!(run, other = %req.run, "a grant held another run's trial; ignored");
-                            share.done(&run, 0.0);
+                            share.done(&run);
                             continue;
                         }
                         let fkeys = FleetKeys::new(&prefix, &req.run);
@@ -285,7 +290,7 @@ pub async fn serve(
                                 tracing::warn!(run, %why, "this worker will not serve the run");
                             }
                             share.unservable(&run, &why);
-                            share.done(&run, 0.0);
+                            share.done(&run);
                             summary.refused += 1;
                             put_message(&session, &fkeys.failures(), &give_back(&req, &id, why, true)).await;
                             continue;
@@ -305,7 +310,7 @@ pub async fn serve(
                     if held.remove(&(req.run.clone(), req.iteration, req.trial)).is_none() {
                         continue; // given back already (shutdown)
                     }
-                    share.done(&req.run, wall);
+                    share.done(&req.run);
                     let fkeys = FleetKeys::new(&prefix, &req.run);
                     match result {
                         Ok(m) => {
