@@ -4,16 +4,19 @@
 //!
 //! Every run tells, in its adverts and in each grant, how many of its trials
 //! are in flight on the fleet. A worker fills each free slot from the run
-//! with trials ready whose trials in flight, divided by its priority, are
-//! fewest (counting what this worker is asking for, and taking off what
-//! ended here since it last heard). Because every worker does so, each slot
-//! that frees goes to the run furthest below its share, and the fleet's
-//! slots — so its trial-seconds — split among the runs with work ready in
-//! proportion to their priorities (water-filling). A run with nothing ready
-//! is skipped, so its share goes to the others; when it has trials again it
-//! takes its share at once, and no more: nothing is owed for the time it was
-//! idle. Ties go to a per-worker order, so that workers do not all ask the
-//! same run. A run paused, beyond the worker's limits, or not heard from for
+//! with trials ready that is below its share of the slots in use (the
+//! runs' trials in flight water-filled by priority, none given more than it
+//! runs or has ready), drawn among those with odds by priority (counting
+//! what this worker is asking for, and taking off what ended here since it
+//! last heard). Because every worker does so, the slots that free go to the
+//! runs below their shares, and the fleet's slots — so its trial-seconds —
+//! split among the runs with work ready in proportion to their priorities.
+//! A run with nothing ready is skipped, so its share goes to the others;
+//! when it has trials again it takes its share at once, and no more: nothing
+//! is owed for the time it was idle. The draw, from the worker's own
+//! sequence, keeps workers from all asking the same run; when no run is
+//! below its share, the slot goes to the fewest trials in flight per
+//! priority. A run paused, beyond the worker's limits, or not heard from for
 //! [`FORGET_AFTER`] is skipped. Must not: talk to zenoh, block, or decide
 //! anything about a trial's result.
 
@@ -124,16 +127,18 @@ impl Share {
     }
 
     /// Chooses runs for `free` slots: `(run id, trials to ask for)`, at most one
-    /// request per run. Each slot goes to a run below its share, drawn with
-    /// odds by how far below (what every worker sees is the same, up to a
-    /// second old: choosing only the furthest would send every worker to one
-    /// run at once); when none is below, to the lowest trials in flight per
+    /// request per run. Each slot goes to a run below its share (by at least
+    /// one trial), drawn with odds by priority — a lottery among them: every
+    /// worker sees the same counts, up to a second old, and choosing the
+    /// furthest below would send every worker to one run at once. When none
+    /// is below, it goes to the run with the fewest trials in flight per
     /// priority. The trials asked for count as in flight until
     /// [`Share::granted`].
     pub fn pick(&mut self, free: u32, max_duration_s: f64) -> Vec<(String, u32)> {
+        let draws: Vec<f64> = (0..free).map(|_| self.draw()).collect();
+        let targets = self.targets(max_duration_s);
         let mut asks: BTreeMap<String, u32> = BTreeMap::new();
-        for _ in 0..free {
-            let u = self.draw();
+        for u in draws {
             let n = |id: &String| asks.get(id).copied().unwrap_or(0);
             let open: Vec<(&String, &RunInfo)> = self
                 .runs
@@ -145,22 +150,22 @@ impl Share {
             if open.is_empty() {
                 break;
             }
-            let targets = self.targets(max_duration_s);
             let below: Vec<(f64, &String)> = open
                 .iter()
                 .map(|(id, r)| {
                     let have = f64::from(r.running.saturating_add(r.asking).saturating_add(n(id)));
-                    (targets.get(*id).copied().unwrap_or(0.0) - have, *id)
+                    let below = targets.get(*id).copied().unwrap_or(0.0) - have >= 1.0;
+                    (if below { r.priority } else { 0.0 }, *id)
                 })
-                .filter(|(d, _)| *d >= 1.0)
+                .filter(|(w, _)| *w > 0.0)
                 .collect();
-            let total: f64 = below.iter().map(|(d, _)| d).sum();
+            let total: f64 = below.iter().map(|(p, _)| p).sum();
             let id = if total > 0.0 {
                 let mut x = u * total;
                 below
                     .iter()
-                    .find(|(d, _)| {
-                        x -= d;
+                    .find(|(p, _)| {
+                        x -= p;
                         x < 0.0
                     })
                     .or(below.last())
@@ -177,6 +182,7 @@ impl Share {
             let Some(id) = id else { break };
             *asks.entry(id).or_default() += 1;
         }
+        drop(targets);
         for (id, n) in &asks {
             if let Some(r) = self.runs.get_mut(id) {
                 r.asking = *n;
