@@ -265,13 +265,14 @@ impl State {
         };
         self.advert.1 = ready > 0;
         self.advert.2 = false;
-        self.advertised_running = (self.sched.in_flight(), Instant::now());
+        let running = self.sched.in_flight();
+        self.advertised_running = (running, Instant::now());
         RunAdvert {
             id: self.facts.id.clone(),
             name: self.facts.experiment.name.clone(),
             priority: self.snap.priority,
             ready,
-            running: u32::try_from(self.sched.in_flight()).unwrap_or(u32::MAX),
+            running: u32::try_from(running).unwrap_or(u32::MAX),
             state: self.state(),
             duration_s: self.facts.experiment.trial_duration_s,
             seq: self.advert.0,
@@ -281,9 +282,9 @@ impl State {
     /// Whether workers must hear of a change now: trials became ready, ran
     /// out, or are ready while a worker that got a short grant waits; or,
     /// while trials are ready, the trials in flight moved by a sixteenth of
-    /// the run's window (at least 2) since the last advert, at most every
-    /// [`ADVERT_MOVED_EVERY`]. Workers choose the run furthest below its
-    /// share by that count: a stale one keeps a run that fell behind waiting
+    /// the last advert's count (at least 2), at most every
+    /// [`ADVERT_MOVED_EVERY`]. Workers share the slots by that count: a
+    /// stale one keeps a run that fell behind waiting
     /// (measured in docs/fleet.md: a run with 73 trials ready went unasked
     /// for 450 ms while workers believed it had its window in flight).
     fn advert_due(&self) -> bool {

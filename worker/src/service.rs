@@ -213,7 +213,8 @@ pub async fn serve(
     cfg: WorkerConfig,
     mut shutdown: tokio::sync::watch::Receiver<bool>,
 ) -> Result<WorkerSummary, WorkerError> {
-    let id = uuid::Uuid::new_v4().to_string();
+    let uuid = uuid::Uuid::new_v4();
+    let id = uuid.to_string();
     let prefix = cfg.prefix.clone();
     // The probe trials run before the worker says it exists.
     let fingerprint = tokio::task::spawn_blocking(crate::fingerprint::of_this_worker)
@@ -229,12 +230,7 @@ pub async fn serve(
         .await
         .map_err(zerr)?;
     tracing::info!(worker = %id, slots = cfg.slots, fingerprint = %protocol::wire::show_fingerprint(fingerprint), "worker ready");
-    let mut share = Share::new({
-        use std::hash::{Hash, Hasher};
-        let mut h = std::hash::DefaultHasher::new();
-        id.hash(&mut h);
-        h.finish()
-    });
+    let mut share = Share::new(uuid.as_u64_pair().0);
     let mut held: BTreeMap<Held, TrialRequest> = BTreeMap::new();
     let mut asking: u32 = 0;
     let mut unservable: BTreeSet<String> = BTreeSet::new();
