@@ -419,6 +419,11 @@ pub struct TrialArgs {
     /// measure them (docs/walk.md); farm trials always use the engine's own.
     #[arg(long, value_name = "KEY=VALUE", hide = true)]
     pub engine: Vec<String>,
+    /// Move one of the robot's physical limits (KEY=VALUE, repeatable:
+    /// `speed_cap_scale`, `max_torque_nm`, `contact_hz`): to measure which
+    /// limit stops a walk (docs/walk.md); farm trials always use the league's.
+    #[arg(long, value_name = "KEY=VALUE", hide = true)]
+    pub limit: Vec<String>,
     /// Trial duration, simulated seconds.
     #[arg(long, default_value_t = 10.0)]
     pub duration: f64,

@@ -413,6 +413,22 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--pgs-iterations"));
+    for bad in [
+        "speed_cap_scale=-1",
+        "torque=3",
+        "max_torque_nm",
+        "contact_hz=inf",
+    ] {
+        let out = naofarm()
+            .args(["trial", "--trials", "1", "--limit", bad])
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(2), "{bad}");
+        assert!(
+            String::from_utf8_lossy(&out.stderr).contains("--limit"),
+            "{bad}"
+        );
+    }
 }
 
 #[test]

@@ -54,7 +54,27 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         let flag = field.trim_end_matches("_kg_m2").replace('_', "-");
         Failure::Usage(anyhow!("--{flag}: {m}"))
     })?;
-    let settings = SimSettings::with_physics(&physics);
+    let mut settings = SimSettings::with_physics(&physics);
+    for kv in &a.limit {
+        let bad = || {
+            Failure::Usage(anyhow!(
+                "--limit `{kv}`: expected KEY=VALUE, VALUE a positive number"
+            ))
+        };
+        let (k, v) = kv.split_once('=').ok_or_else(bad)?;
+        let v: f64 = v
+            .parse()
+            .ok()
+            .filter(|v: &f64| v.is_finite() && *v > 0.0)
+            .ok_or_else(bad)?;
+        match k {
+            "speed_cap_scale" => settings.speed_cap_scale = v.min(100.0),
+            "max_torque_nm" => settings.max_torque_nm = v.min(1000.0),
+            "contact_hz" => settings.contact_hz = v.min(10_000.0),
+            "contact_prediction_m" => settings.contact_prediction_m = v.min(0.1),
+            _ => return Err(Failure::Usage(anyhow!("--limit: unknown limit `{k}` (speed_cap_scale, max_torque_nm, contact_hz, contact_prediction_m)"))),
+        }
+    }
     let walk = WalkEngine::parse(&a.walk).map_err(|m| Failure::Usage(anyhow!("--walk: {m}")))?;
     let mut engine = trial::Engine::of(walk);
     for kv in &a.engine {

@@ -46,6 +46,9 @@ pub const GAIT: GaitConfig = GaitConfig {
     hip_roll_comp_rad: 0.10,
     start_s: 0.5,
     travel: TravelProfile::Trapezoid,
+    ramp_steps: 0.0,
+    lift_peak: 0.5,
+    lift_end: 1.0,
 };
 
 /// Time constant of the tilt estimate's pull towards the accelerometer, s.

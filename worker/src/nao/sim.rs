@@ -68,6 +68,11 @@ pub struct SimSettings {
     /// instead of only to joints past a stop: kept to check in tests that
     /// leaving the idle rows out changes no bit.
     pub every_limit_row: bool,
+    /// Every joint's speed cap times this (1: the league's robot): kept to
+    /// measure which limit stops a walk (`naofarm trial --limit`), not for trials.
+    pub speed_cap_scale: f64,
+    /// Most torque a servo applies, N·m ([`MAX_TORQUE_NM`]: the league's).
+    pub max_torque_nm: f64,
 }
 
 impl Default for SimSettings {
@@ -88,6 +93,8 @@ impl Default for SimSettings {
             armature_kg_m2: physics.armature_kg_m2,
             impulse_joints: false,
             every_limit_row: false,
+            speed_cap_scale: 1.0,
+            max_torque_nm: MAX_TORQUE_NM,
         }
     }
 }
@@ -421,9 +428,9 @@ impl Sim {
                 .limits([joint.limits_rad.0 as f32, joint.limits_rad.1 as f32])
                 .motor_model(MotorModel::ForceBased)
                 .motor_velocity(0.0, settings.motor_damping as f32)
-                .motor_max_force(MAX_TORQUE_NM as f32)
+                .motor_max_force(settings.max_torque_nm as f32)
                 .contacts_enabled(false);
-            let max_speed = joint.max_speed_rad_s as f32;
+            let max_speed = (joint.max_speed_rad_s * settings.speed_cap_scale) as f32;
             if settings.impulse_joints {
                 let handle = world.impulse_joints.insert(*p, *c, builder, true);
                 hinges[j] = Some(Hinge {

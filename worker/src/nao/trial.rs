@@ -76,6 +76,9 @@ impl Engine {
             "com_above_hip_m" => g.com_above_hip_m = num()?.clamp(-0.1, 0.2),
             "hip_roll_comp_rad" => g.hip_roll_comp_rad = num()?.clamp(-0.5, 0.5),
             "start_s" => g.start_s = num()?.clamp(0.0, 5.0),
+            "ramp_steps" => g.ramp_steps = num()?.clamp(0.0, 100.0),
+            "lift_peak" => g.lift_peak = num()?.clamp(0.05, 0.95),
+            "lift_end" => g.lift_end = num()?.clamp(0.1, 1.0),
             "travel" => {
                 g.travel = match value {
                     "cosine" => super::walk::TravelProfile::Cosine,

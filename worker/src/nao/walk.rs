@@ -74,6 +74,14 @@ pub struct GaitConfig {
     pub start_s: f64,
     /// Swing travel profile (forward, over single support).
     pub travel: TravelProfile,
+    /// Steps over which the step length rises linearly to its full value;
+    /// 0: the first two steps half as long, then full (the open loop's).
+    pub ramp_steps: f64,
+    /// Share of the swing at which the lift peaks (0.5: the symmetric
+    /// (1 − cos 2πs)/2 of the open loop).
+    pub lift_peak: f64,
+    /// Share of the swing by which the foot is down again (1: at touchdown).
+    pub lift_end: f64,
 }
 
 /// How the swing foot travels forward over single support (s in 0..1, as a
@@ -122,6 +130,9 @@ impl GaitConfig {
         hip_roll_comp_rad: HIP_ROLL_COMP_RAD,
         start_s: START_S,
         travel: TravelProfile::Cosine,
+        ramp_steps: 0.0,
+        lift_peak: 0.5,
+        lift_end: 1.0,
     };
 }
 
@@ -256,7 +267,9 @@ impl Gait {
         let nsteps = ((duration_s + 10.0 * tc) / cfg.period_s) as usize + 4;
         let mut steps = vec![0.0; nsteps + 1];
         for k in 0..nsteps {
-            let len = if k < 2 {
+            let len = if cfg.ramp_steps > 0.0 {
+                p.step_length * ((k + 1) as f64 / cfg.ramp_steps).min(1.0)
+            } else if k < 2 {
                 p.step_length / 2.0
             } else {
                 p.step_length
@@ -337,6 +350,22 @@ impl Gait {
         [a[0] + (b[0] - a[0]) * f, a[1] + (b[1] - a[1]) * f]
     }
 
+    /// The swing foot's lift at swing phase s, a share of `height_lift`.
+    fn lift_profile(&self, s: f64) -> f64 {
+        let (peak, end) = (self.cfg.lift_peak, self.cfg.lift_end);
+        if peak == 0.5 && end == 1.0 {
+            return (1.0 - libm::cos(std::f64::consts::TAU * s)) / 2.0;
+        }
+        let pi = std::f64::consts::PI;
+        if s < peak {
+            (1.0 - libm::cos(pi * s / peak)) / 2.0
+        } else if s < end {
+            (1.0 + libm::cos(pi * (s - peak) / (end - peak))) / 2.0
+        } else {
+            0.0
+        }
+    }
+
     /// The hip midpoint and feet at time t.
     #[must_use]
     pub fn state(&self, t: f64) -> GaitState {
@@ -355,7 +384,7 @@ impl Gait {
             let sx = self.cfg.travel.at(s);
             let x0 = if k >= 1 { step(k - 1) } else { 0.0 };
             let x1 = step(k + 1);
-            let lift = self.p.height_lift * (1.0 - libm::cos(std::f64::consts::TAU * s)) / 2.0;
+            let lift = self.p.height_lift * self.lift_profile(s);
             let side_y = |side: usize| if side == 0 { w } else { -w };
             feet[sup] = [step(k), side_y(sup), ANKLE_H];
             feet[sw] = [x0 + (x1 - x0) * sx, side_y(sw), ANKLE_H + lift];
@@ -490,6 +519,38 @@ mod tests {
                 assert!(foot.angle() < 1e-9, "foot not flat: {}", foot.angle());
                 checked += 1;
             }
+        }
+    }
+
+    /// The lift's shapes (`--engine lift_peak`, `lift_end`) peak where asked
+    /// at `height_lift`, never above it, and are down by `lift_end`; the
+    /// default is the open loop's symmetric profile.
+    #[test]
+    fn the_lift_peaks_where_asked_and_never_above_height_lift() {
+        let model = NaoModel::new(Morphology::of_type(0).unwrap()).unwrap();
+        for (peak, end) in [(0.5, 1.0), (0.3, 0.7), (0.6, 1.0), (0.4, 0.85)] {
+            let cfg = GaitConfig {
+                lift_peak: peak,
+                lift_end: end,
+                ..GaitConfig::OPEN_LOOP
+            };
+            let g = Gait::with_config(&model, WalkParams::EXPERT, 3.0, cfg);
+            let (mut top, mut at) = (0.0f64, 0.0);
+            for i in 0..=1000 {
+                let s = f64::from(i) / 1000.0;
+                let l = g.lift_profile(s);
+                assert!((0.0..=1.0).contains(&l), "{peak} {end} {s}: {l}");
+                if s >= end {
+                    assert!(l.abs() < 1e-12, "{peak} {end} {s}: {l}");
+                }
+                if l > top {
+                    (top, at) = (l, s);
+                }
+            }
+            assert!(
+                (top - 1.0).abs() < 1e-9 && (at - peak).abs() < 1e-9,
+                "{peak}: {top} at {at}"
+            );
         }
     }
 
