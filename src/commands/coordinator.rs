@@ -22,12 +22,12 @@ pub fn coordinator(job: &JobArgs, net: &NetArgs, json: bool) -> Result<(), Failu
     let (run, effects) = open_run(job)?;
     // The service runs on this thread; one worker for the signal task and the like.
     let rt = runtime_with(1)?;
-    rt.block_on(async {
+    let (job, prefix) = (job.clone(), net.prefix.clone());
+    let serve = async move {
         let session = open_session(cfg).await?;
         crate::net::say_endpoints(&session, "coordinator").await;
         let shutdown = signals();
-        let served =
-            serve_with_view(&session, (run, effects), job, &net.prefix, shutdown, json).await;
+        let served = serve_with_view(&session, (run, effects), &job, &prefix, shutdown, json).await;
         let _ = session.close().await;
         let (ended, view) = served;
         summary(
@@ -35,5 +35,14 @@ pub fn coordinator(job: &JobArgs, net: &NetArgs, json: bool) -> Result<(), Failu
             &ended.map_err(crate::common::service_failure)?,
             view,
         )
+    };
+    rt.block_on(async {
+        if std::env::var_os("NAOFARM_COORD_OWN_THREAD").is_some() {
+            return serve.await;
+        }
+        zenoh_runtime::ZRuntime::Application
+            .spawn(serve)
+            .await
+            .map_err(|e| Failure::Job(anyhow::anyhow!("the coordinator's task ended: {e}")))?
     })
 }
