@@ -420,7 +420,9 @@ pub struct TrialArgs {
     #[arg(long, value_name = "KEY=VALUE", hide = true)]
     pub engine: Vec<String>,
     /// Move one of the robot's physical limits (KEY=VALUE, repeatable:
-    /// `speed_cap_scale`, `max_torque_nm`, `contact_hz`): to measure which
+    /// `speed_cap_scale`, `speed_cap_joints` (name suffixes, comma-separated:
+    /// the joints the scale applies to), `max_torque_nm`, `contact_hz`,
+    /// `contact_prediction_m`): to measure which
     /// limit stops a walk (docs/walk.md); farm trials always use the league's.
     #[arg(long, value_name = "KEY=VALUE", hide = true)]
     pub limit: Vec<String>,

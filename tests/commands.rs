@@ -418,6 +418,7 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
         "torque=3",
         "max_torque_nm",
         "contact_hz=inf",
+        "speed_cap_joints=xyz",
     ] {
         let out = naofarm()
             .args(["trial", "--trials", "1", "--limit", bad])

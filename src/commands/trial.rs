@@ -62,6 +62,30 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             ))
         };
         let (k, v) = kv.split_once('=').ok_or_else(bad)?;
+        if k == "speed_cap_joints" {
+            // Joints by name suffix, comma-separated (`le3,le4`: both hips'
+            // pitch and both knees): the speed cap's scale applies to them only.
+            let model = worker::nao::model::NaoModel::with_params(
+                0,
+                &protocol::params::ParamValues::default(),
+            )
+            .map_err(|e| Failure::Job(e.into()))?;
+            for suffix in v.split(',') {
+                let mut any = false;
+                for (j, joint) in model.joints.iter().enumerate() {
+                    if j < 64 && joint.name.ends_with(suffix) {
+                        settings.speed_cap_joints |= 1 << j;
+                        any = true;
+                    }
+                }
+                if !any {
+                    return Err(Failure::Usage(anyhow!(
+                        "--limit `{kv}`: no joint ends with `{suffix}`"
+                    )));
+                }
+            }
+            continue;
+        }
         let v: f64 = v
             .parse()
             .ok()

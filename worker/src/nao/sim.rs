@@ -71,6 +71,9 @@ pub struct SimSettings {
     /// Every joint's speed cap times this (1: the league's robot): kept to
     /// measure which limit stops a walk (`naofarm trial --limit`), not for trials.
     pub speed_cap_scale: f64,
+    /// The joints (bits of their model indices) `speed_cap_scale` applies
+    /// to; 0: every joint.
+    pub speed_cap_joints: u64,
     /// Most torque a servo applies, N·m ([`MAX_TORQUE_NM`]: the league's).
     pub max_torque_nm: f64,
 }
@@ -94,6 +97,7 @@ impl Default for SimSettings {
             impulse_joints: false,
             every_limit_row: false,
             speed_cap_scale: 1.0,
+            speed_cap_joints: 0,
             max_torque_nm: MAX_TORQUE_NM,
         }
     }
@@ -430,7 +434,14 @@ impl Sim {
                 .motor_velocity(0.0, settings.motor_damping as f32)
                 .motor_max_force(settings.max_torque_nm as f32)
                 .contacts_enabled(false);
-            let max_speed = (joint.max_speed_rad_s * settings.speed_cap_scale) as f32;
+            let scaled = settings.speed_cap_joints == 0
+                || (j < 64 && settings.speed_cap_joints >> j & 1 == 1);
+            let scale = if scaled {
+                settings.speed_cap_scale
+            } else {
+                1.0
+            };
+            let max_speed = (joint.max_speed_rad_s * scale) as f32;
             if settings.impulse_joints {
                 let handle = world.impulse_joints.insert(*p, *c, builder, true);
                 hinges[j] = Some(Hinge {
