@@ -20,7 +20,11 @@ pub fn coordinator(job: &JobArgs, net: &NetArgs, json: bool) -> Result<(), Failu
         .zenoh_config("coordinator", default_listen)
         .map_err(Failure::Usage)?;
     let (run, effects) = open_run(job)?;
-    // The service runs on this thread; one worker for the signal task and the like.
+    // The service runs on zenoh's application thread, which also does all of
+    // the coordinator's zenoh work: a message reaches the service without
+    // waking another thread (docs/fleet.md, measured). This thread only
+    // waits; one tokio worker for what the runtime needs beside it.
+    // `NAOFARM_COORD_OWN_THREAD=1` serves on this thread instead, to measure.
     let rt = runtime_with(1)?;
     let (job, prefix) = (job.clone(), net.prefix.clone());
     let serve = async move {

@@ -56,48 +56,7 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     })?;
     let mut settings = SimSettings::with_physics(&physics);
     for kv in &a.limit {
-        let bad = || {
-            Failure::Usage(anyhow!(
-                "--limit `{kv}`: expected KEY=VALUE, VALUE a positive number"
-            ))
-        };
-        let (k, v) = kv.split_once('=').ok_or_else(bad)?;
-        if k == "speed_cap_joints" {
-            // Joints by name suffix, comma-separated (`le3,le4`: both hips'
-            // pitch and both knees): the speed cap's scale applies to them only.
-            let model = worker::nao::model::NaoModel::with_params(
-                0,
-                &protocol::params::ParamValues::default(),
-            )
-            .map_err(|e| Failure::Job(e.into()))?;
-            for suffix in v.split(',') {
-                let mut any = false;
-                for (j, joint) in model.joints.iter().enumerate() {
-                    if j < 64 && joint.name.ends_with(suffix) {
-                        settings.speed_cap_joints |= 1 << j;
-                        any = true;
-                    }
-                }
-                if !any {
-                    return Err(Failure::Usage(anyhow!(
-                        "--limit `{kv}`: no joint ends with `{suffix}`"
-                    )));
-                }
-            }
-            continue;
-        }
-        let v: f64 = v
-            .parse()
-            .ok()
-            .filter(|v: &f64| v.is_finite() && *v > 0.0)
-            .ok_or_else(bad)?;
-        match k {
-            "speed_cap_scale" => settings.speed_cap_scale = v.min(100.0),
-            "max_torque_nm" => settings.max_torque_nm = v.min(1000.0),
-            "contact_hz" => settings.contact_hz = v.min(10_000.0),
-            "contact_prediction_m" => settings.contact_prediction_m = v.min(0.1),
-            _ => return Err(Failure::Usage(anyhow!("--limit: unknown limit `{k}` (speed_cap_scale, max_torque_nm, contact_hz, contact_prediction_m)"))),
-        }
+        move_limit(&mut settings, kv)?;
     }
     let walk = WalkEngine::parse(&a.walk).map_err(|m| Failure::Usage(anyhow!("--walk: {m}")))?;
     let mut engine = trial::Engine::of(walk);
@@ -345,5 +304,55 @@ fn render(path: &std::path::Path, what: &Replayed<'_>, title: &str) -> Result<()
     std::fs::write(path, svg)
         .map_err(|e| Failure::Usage(anyhow!("--render {}: {e}", path.display())))?;
     eprintln!("rendered seed {} to {}", what.seed, path.display());
+    Ok(())
+}
+
+/// `--limit KEY=VALUE`: moves one of the robot's physical limits in
+/// `settings`, to measure which limit stops a walk (docs/walk.md).
+fn move_limit(settings: &mut SimSettings, kv: &str) -> Result<(), Failure> {
+    let bad = || {
+        Failure::Usage(anyhow!(
+            "--limit `{kv}`: expected KEY=VALUE, VALUE a positive number"
+        ))
+    };
+    let (k, v) = kv.split_once('=').ok_or_else(bad)?;
+    if k == "speed_cap_joints" {
+        // Joints by name suffix, comma-separated (`le3,le4`: both hips'
+        // pitch and both knees): the speed cap's scale applies to them only.
+        let model =
+            worker::nao::model::NaoModel::with_params(0, &protocol::params::ParamValues::default())
+                .map_err(|e| Failure::Job(e.into()))?;
+        for suffix in v.split(',') {
+            let joints: Vec<usize> = (0..model.joints.len().min(64))
+                .filter(|j| model.joints[*j].name.ends_with(suffix))
+                .collect();
+            if joints.is_empty() {
+                return Err(Failure::Usage(anyhow!(
+                    "--limit `{kv}`: no joint ends with `{suffix}`"
+                )));
+            }
+            for j in joints {
+                settings.speed_cap_joints |= 1 << j;
+            }
+        }
+        return Ok(());
+    }
+    let v: f64 = v
+        .parse()
+        .ok()
+        .filter(|v: &f64| v.is_finite() && *v > 0.0)
+        .ok_or_else(bad)?;
+    match k {
+        "speed_cap_scale" => settings.speed_cap_scale = v.min(100.0),
+        "max_torque_nm" => settings.max_torque_nm = v.min(1000.0),
+        "contact_hz" => settings.contact_hz = v.min(10_000.0),
+        "contact_prediction_m" => settings.contact_prediction_m = v.min(0.1),
+        _ => {
+            return Err(Failure::Usage(anyhow!(
+                "--limit: unknown limit `{k}` (speed_cap_scale, speed_cap_joints, \
+                 max_torque_nm, contact_hz, contact_prediction_m)"
+            )))
+        }
+    }
     Ok(())
 }
