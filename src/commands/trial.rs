@@ -36,7 +36,8 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     }
     let params = parse_params(&a.params)?;
     let values = ParamValues::from_named(&params).map_err(|e| Failure::Usage(e.into()))?;
-    NaoModel::with_params(a.robot_type, &values).map_err(|e| Failure::Usage(e.into()))?;
+    let model =
+        NaoModel::with_params(a.robot_type, &values).map_err(|e| Failure::Usage(e.into()))?;
     if a.threads.is_some_and(|t| t == 0 || t > 1024) {
         return Err(Failure::Usage(anyhow!("--threads must be in 1..=1024")));
     }
@@ -56,7 +57,7 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     })?;
     let mut settings = SimSettings::with_physics(&physics);
     for kv in &a.limit {
-        move_limit(&mut settings, kv)?;
+        move_limit(&mut settings, &model, kv)?;
     }
     let walk = WalkEngine::parse(&a.walk).map_err(|m| Failure::Usage(anyhow!("--walk: {m}")))?;
     let mut engine = trial::Engine::of(walk);
@@ -308,8 +309,9 @@ fn render(path: &std::path::Path, what: &Replayed<'_>, title: &str) -> Result<()
 }
 
 /// `--limit KEY=VALUE`: moves one of the robot's physical limits in
-/// `settings`, to measure which limit stops a walk (docs/walk.md).
-fn move_limit(settings: &mut SimSettings, kv: &str) -> Result<(), Failure> {
+/// `settings` (joints named as in `model`, the trial's own), to measure
+/// which limit stops a walk (docs/walk.md).
+fn move_limit(settings: &mut SimSettings, model: &NaoModel, kv: &str) -> Result<(), Failure> {
     let bad = || {
         Failure::Usage(anyhow!(
             "--limit `{kv}`: expected KEY=VALUE, VALUE a positive number"
@@ -319,9 +321,6 @@ fn move_limit(settings: &mut SimSettings, kv: &str) -> Result<(), Failure> {
     if k == "speed_cap_joints" {
         // Joints by name suffix, comma-separated (`le3,le4`: both hips'
         // pitch and both knees): the speed cap's scale applies to them only.
-        let model =
-            worker::nao::model::NaoModel::with_params(0, &protocol::params::ParamValues::default())
-                .map_err(|e| Failure::Job(e.into()))?;
         for suffix in v.split(',') {
             let joints: Vec<usize> = (0..model.joints.len().min(64))
                 .filter(|j| model.joints[*j].name.ends_with(suffix))

@@ -143,12 +143,11 @@ impl Share {
             }
             let below: Vec<(f64, &String)> = open
                 .iter()
-                .map(|(id, r)| {
+                .filter(|(id, r)| {
                     let have = f64::from(r.running.saturating_add(r.asking).saturating_add(n(id)));
-                    let below = targets.get(*id).copied().unwrap_or(0.0) - have >= 1.0;
-                    (if below { r.priority } else { 0.0 }, *id)
+                    targets.get(*id).copied().unwrap_or(0.0) - have >= 1.0
                 })
-                .filter(|(w, _)| *w > 0.0)
+                .map(|(id, r)| (r.priority, *id))
                 .collect();
             let total: f64 = below.iter().map(|(p, _)| p).sum();
             let id = if total > 0.0 {

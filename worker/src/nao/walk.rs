@@ -353,6 +353,7 @@ impl Gait {
     /// The swing foot's lift at swing phase s, a share of `height_lift`.
     fn lift_profile(&self, s: f64) -> f64 {
         let (peak, end) = (self.cfg.lift_peak, self.cfg.lift_end);
+        // The default is computed as the open loop always did, to keep its bits.
         if peak == 0.5 && end == 1.0 {
             return (1.0 - libm::cos(std::f64::consts::TAU * s)) / 2.0;
         }
