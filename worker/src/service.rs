@@ -277,7 +277,7 @@ pub async fn serve(
                     for req in trials {
                         if req.run != run {
                             tracing::warn!(run, other = %req.run, "a grant held another run's trial; ignored");
-                            share.done(&run);
+                            share.done(&run, None);
                             continue;
                         }
                         let fkeys = FleetKeys::new(&prefix, &req.run);
@@ -286,7 +286,7 @@ pub async fn serve(
                                 tracing::warn!(run, %why, "this worker will not serve the run");
                             }
                             share.unservable(&run, &why);
-                            share.done(&run);
+                            share.done(&run, None);
                             summary.refused += 1;
                             put_message(&session, &fkeys.failures(), &give_back(&req, &id, why, true)).await;
                             continue;
@@ -306,7 +306,7 @@ pub async fn serve(
                     if held.remove(&(req.run.clone(), req.iteration, req.trial)).is_none() {
                         continue; // given back already (shutdown)
                     }
-                    share.done(&req.run);
+                    share.done(&req.run, Some(wall));
                     let fkeys = FleetKeys::new(&prefix, &req.run);
                     match result {
                         Ok(m) => {

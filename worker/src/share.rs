@@ -3,22 +3,29 @@
 //! message or reads a clock).
 //!
 //! Every run tells, in its adverts and in each grant, how many of its trials
-//! are in flight on the fleet. A worker fills each free slot from the run
-//! with trials ready that is below its share of the slots in use (the
-//! runs' trials in flight water-filled by priority, none given more than it
-//! runs or has ready), drawn among those with odds by priority (counting
-//! what this worker is asking for, and taking off what ended here since it
-//! last heard). Because every worker does so, the slots that free go to the
-//! runs below their shares, and the fleet's slots — so its trial-seconds —
-//! split among the runs with work ready in proportion to their priorities.
-//! A run with nothing ready is skipped, so its share goes to the others;
-//! when it has trials again it takes its share at once, and no more: nothing
-//! is owed for the time it was idle. The draw, from the worker's own
-//! stream (ChaCha8), keeps workers from all asking the same run; when no run is
-//! below its share, the slot goes to the fewest trials in flight per
-//! priority. A run paused, beyond the worker's limits, or not heard from for
-//! [`FORGET_AFTER`] is skipped. Must not: talk to zenoh, block, or decide
-//! anything about a trial's result.
+//! are in flight on the fleet. A worker fills each free slot from a run with
+//! trials ready that is below its share of the slots in use (the runs'
+//! trials in flight water-filled by priority, none given more than it runs
+//! or has ready) by at least one trial, drawn among those; when none is, it
+//! draws among every run with trials ready. Both draws are lotteries with
+//! odds of a run's priority over the wall time its trials take on this
+//! worker: a run then starts trials at a rate proportional to that weight and
+//! holds each slot for as long as its trials take, so it holds slots — the
+//! fleet's trial-seconds — in proportion to its priority, whatever the other
+//! runs' trial lengths. The first draw lets a run whose trials just became
+//! ready take the slots that free next (a run whose window is close to its
+//! share needs that); the second needs no count at all, so the runs' counts,
+//! always somewhat stale, decide only the first: drawing the furthest below,
+//! or the fewest in flight per priority when none is below, gave the runs
+//! with small shares more than theirs (docs/fleet.md). A run with nothing
+//! ready is skipped, so its share goes to the others by their priorities;
+//! when it has trials again it takes its share, and nothing is owed for the
+//! time it was idle. The draws come from the worker's own stream (ChaCha8),
+//! so workers draw differently; the free slots of one request take evenly
+//! spaced points of one draw, so a worker with many free slots splits them by
+//! the odds to within one trial. A run paused, beyond the worker's limits,
+//! or not heard from for [`FORGET_AFTER`] is skipped. Must not: talk to
+//! zenoh, block, or decide anything about a trial's result.
 
 use std::{collections::BTreeMap, time::Duration};
 
@@ -30,6 +37,10 @@ use tokio::time::Instant;
 /// A run whose adverts stop for this long is forgotten (its coordinator went).
 pub const FORGET_AFTER: Duration = Duration::from_millis(3500);
 
+/// How much of a run's mean wall time per trial one new trial moves (an
+/// exponential mean over about the last 20 trials).
+const WALL_GAIN: f64 = 0.05;
+
 #[derive(Debug, Clone)]
 struct RunInfo {
     priority: f64,
@@ -39,7 +50,10 @@ struct RunInfo {
     /// those that ended here since.
     running: u32,
     state: RunState,
+    /// The trials' simulated duration (seconds), as advertised.
     duration_s: f64,
+    /// Mean wall time of its trials on this worker (seconds), once one ran.
+    wall_s: Option<f64>,
     seq: u64,
     heard: Instant,
     held: u32,
@@ -48,15 +62,13 @@ struct RunInfo {
     empty_until: Option<u64>,
     /// Why this worker will not serve it (a limit), if so.
     unservable: Option<String>,
-    /// This worker's tie-break among runs equally far below their shares.
-    order: u64,
 }
 
 /// The fair-share state of one worker.
 #[derive(Debug, Clone)]
 pub struct Share {
     runs: BTreeMap<String, RunInfo>,
-    /// This worker's own draws: the lottery, and each run's tie-break order.
+    /// This worker's own draws.
     rng: ChaCha8Rng,
 }
 
@@ -71,10 +83,6 @@ impl Share {
         }
     }
 
-    fn key(r: &RunInfo, extra: u32) -> f64 {
-        f64::from(r.running.saturating_add(r.asking).saturating_add(extra)) / r.priority
-    }
-
     fn eligible(r: &RunInfo, max_duration_s: f64) -> bool {
         r.state == RunState::Running
             && r.ready > 0
@@ -84,22 +92,41 @@ impl Share {
             && r.duration_s <= max_duration_s
     }
 
+    /// Wall seconds a trial of `r` is expected to hold a slot here: its own
+    /// mean once one ran; before, its simulated duration times the mean
+    /// ratio of wall to simulated time of the runs that did (1 if none did).
+    fn wall_of(&self, r: &RunInfo) -> f64 {
+        if let Some(w) = r.wall_s {
+            return w.max(1e-6);
+        }
+        let (mut sum, mut n) = (0.0, 0.0);
+        for o in self.runs.values() {
+            if let Some(w) = o.wall_s {
+                if o.duration_s > 0.0 {
+                    sum += w / o.duration_s;
+                    n += 1.0;
+                }
+            }
+        }
+        let ratio = if n > 0.0 { sum / n } else { 1.0 };
+        (r.duration_s * ratio).max(1e-6)
+    }
+
     /// A run's advert arrived.
     pub fn advert(&mut self, ad: &RunAdvert, now: Instant) {
-        let rng = &mut self.rng;
         let r = self.runs.entry(ad.id.clone()).or_insert_with(|| RunInfo {
             priority: 1.0,
             ready: 0,
             running: 0,
             state: RunState::Running,
             duration_s: 0.0,
+            wall_s: None,
             seq: 0,
             heard: now,
             held: 0,
             asking: 0,
             empty_until: None,
             unservable: None,
-            order: rng.random(),
         });
         if ad.seq < r.seq {
             // A restarted coordinator counts from 1 again; take it as new.
@@ -117,59 +144,55 @@ impl Share {
         }
     }
 
-    /// Chooses runs for `free` slots: `(run id, trials to ask for)`, at most one
-    /// request per run. Each slot goes to a run below its share (by at least
-    /// one trial), drawn with odds by priority — a lottery among them: every
-    /// worker sees the same counts, up to a second old, and choosing the
-    /// furthest below would send every worker to one run at once. When none
-    /// is below, it goes to the run with the fewest trials in flight per
-    /// priority. The trials asked for count as in flight until
-    /// [`Share::granted`].
+    /// Chooses runs for `free` slots: `(run id, trials to ask for)`, at most
+    /// one request per run. Each slot goes to a run below its share by at
+    /// least one trial, drawn among those; when none is, to any run with
+    /// trials ready, drawn among all (the module's doc says why). The odds
+    /// are a run's priority over its trials' wall time here; a run is asked
+    /// for no more than it has ready. The trials asked for count as the run's
+    /// in flight until [`Share::granted`].
     pub fn pick(&mut self, free: u32, max_duration_s: f64) -> Vec<(String, u32)> {
-        let draws: Vec<f64> = (0..free).map(|_| self.rng.random()).collect();
+        let offset: f64 = self.rng.random();
         let targets = self.targets(max_duration_s);
         let mut asks: BTreeMap<String, u32> = BTreeMap::new();
-        for u in draws {
+        for slot in 0..free {
             let n = |id: &String| asks.get(id).copied().unwrap_or(0);
-            let open: Vec<(&String, &RunInfo)> = self
+            // (odds, run, below its share by a trial)
+            let open: Vec<(f64, &String, bool)> = self
                 .runs
                 .iter()
                 .filter(|(id, r)| {
                     (n(id) > 0 || Self::eligible(r, max_duration_s)) && r.ready > n(id)
                 })
+                .map(|(id, r)| {
+                    let have = f64::from(r.running.saturating_add(r.asking).saturating_add(n(id)));
+                    let below = targets.get(id).copied().unwrap_or(0.0) - have >= 1.0;
+                    (r.priority / self.wall_of(r), id, below)
+                })
                 .collect();
-            if open.is_empty() {
+            let any_below = open.iter().any(|o| o.2);
+            let drawn: Vec<(f64, &String)> = open
+                .into_iter()
+                .filter(|o| o.2 || !any_below)
+                .map(|(odds, id, _)| (odds, id))
+                .collect();
+            let total: f64 = drawn.iter().map(|(odds, _)| odds).sum();
+            if drawn.is_empty() || total <= 0.0 || !total.is_finite() {
                 break;
             }
-            let below: Vec<(f64, &String)> = open
+            // Stratified: the free slots of one request draw evenly spaced points.
+            let mut x = (offset + f64::from(slot)) / f64::from(free) * total;
+            let Some(id) = drawn
                 .iter()
-                .filter(|(id, r)| {
-                    let have = f64::from(r.running.saturating_add(r.asking).saturating_add(n(id)));
-                    targets.get(*id).copied().unwrap_or(0.0) - have >= 1.0
+                .find(|(odds, _)| {
+                    x -= odds;
+                    x < 0.0
                 })
-                .map(|(id, r)| (r.priority, *id))
-                .collect();
-            let total: f64 = below.iter().map(|(p, _)| p).sum();
-            let id = if total > 0.0 {
-                let mut x = u * total;
-                below
-                    .iter()
-                    .find(|(p, _)| {
-                        x -= p;
-                        x < 0.0
-                    })
-                    .or(below.last())
-                    .map(|(_, id)| (*id).clone())
-            } else {
-                open.iter()
-                    .map(|(id, r)| (Self::key(r, n(id)), r.order, *id))
-                    .min_by(|a, b| {
-                        a.0.total_cmp(&b.0)
-                            .then_with(|| (a.1, a.2).cmp(&(b.1, b.2)))
-                    })
-                    .map(|(_, _, id)| id.clone())
+                .or(drawn.last())
+                .map(|(_, id)| (*id).clone())
+            else {
+                break;
             };
-            let Some(id) = id else { break };
             *asks.entry(id).or_default() += 1;
         }
         drop(targets);
@@ -213,17 +236,20 @@ impl Share {
     }
 
     /// The run answered a request for `asked` trials with `got` (0 when the
-    /// request failed), saying `ready` more are ready and `running` are in
-    /// flight as of its advert `seq` (`answer`; `None`: no answer). A short
-    /// answer means it has no more ready for now: the run is skipped until an
-    /// advert newer than `seq`. A grant older than an advert already heard
-    /// (the advert overtook the reply) says nothing new: the advert stands.
+    /// request failed), saying `ready` more are ready as of its advert `seq`
+    /// (`answer`; `None`: no answer). A short answer means it has no more
+    /// ready for now: the run is skipped until an advert newer than `seq`. A
+    /// grant older than an advert already heard (the advert overtook the
+    /// reply) says nothing new: the advert stands.
     pub fn granted(&mut self, run: &str, asked: u32, got: u32, answer: Option<(u32, u32, u64)>) {
         if let Some(r) = self.runs.get_mut(run) {
             r.asking = r.asking.saturating_sub(asked);
             r.held += got;
             match answer {
-                Some((_, _, seq)) if seq < r.seq => r.ready = r.ready.saturating_sub(got),
+                Some((_, _, seq)) if seq < r.seq => {
+                    r.ready = r.ready.saturating_sub(got);
+                    r.running += got;
+                }
                 Some((ready, running, seq)) => {
                     r.ready = ready;
                     r.running = running;
@@ -240,11 +266,15 @@ impl Share {
         }
     }
 
-    /// A trial of `run` ended here (run, failed or given back).
-    pub fn done(&mut self, run: &str) {
+    /// A trial of `run` ended here (run, failed or given back); `wall_s`:
+    /// the wall seconds it held its slot, when it ran to its end.
+    pub fn done(&mut self, run: &str, wall_s: Option<f64>) {
         if let Some(r) = self.runs.get_mut(run) {
             r.held = r.held.saturating_sub(1);
             r.running = r.running.saturating_sub(1);
+            if let Some(w) = wall_s.filter(|w| w.is_finite() && *w >= 0.0) {
+                r.wall_s = Some(r.wall_s.map_or(w, |m| m + WALL_GAIN * (w - m)));
+            }
         }
     }
 
@@ -286,32 +316,62 @@ mod tests {
         }
     }
 
-    /// A fleet in miniature, on a clock of ticks (20 to a trial): `workers`
-    /// workers of `slots` slots serve runs of the given priorities and
-    /// windows (trials in flight at most; `u32::MAX`: always trials ready).
-    /// Trials last 20 to 26 ticks. Each run advertises as a coordinator does:
-    /// every 20 ticks, when trials become ready after a worker got a short
-    /// grant, and when its trials in flight moved by a sixteenth (at least 2)
-    /// while it has trials ready; every grant tells its asker. Workers act in
-    /// turn, each on what it last heard. Returns each run's slot-ticks after
-    /// a warm-up.
-    fn fleet(runs: &[(u32, u32)], workers: usize, slots: u32) -> Vec<f64> {
+    /// A run of the fleet in miniature.
+    #[derive(Clone, Copy)]
+    struct Sim {
+        priority: u32,
+        /// Trials in flight at most (`u32::MAX`: always trials ready).
+        window: u32,
+        /// Ticks a trial takes (it takes up to 69 more).
+        ticks: u32,
+    }
+
+    fn backlogged(priority: u32) -> Sim {
+        Sim {
+            priority,
+            window: u32::MAX,
+            ticks: 200,
+        }
+    }
+
+    /// A fleet in miniature, on a clock of ticks (200 to a trial, as 5 ms
+    /// to the bench's trials of 1 s): `workers` workers of `slots` slots
+    /// serve the runs; a trial lasts its run's ticks plus 0 to 69. Each run
+    /// advertises as a coordinator does: every 200 ticks; when its trials
+    /// become ready or run out; when trials are ready while a worker that
+    /// got a short grant waits; and when its trials in flight moved by a
+    /// sixteenth (at least 2), at most every 5 ticks. Every grant tells its
+    /// asker. Workers act in turn, each on what it last heard. Returns each
+    /// run's slot-ticks after a warm-up of 10,000 ticks. (On a clock of 20
+    /// ticks to a trial, where every worker acts on one tick's adverts, the
+    /// views of the runs' trials in flight were off by 5 trials of 60, and
+    /// runs of one priority could lock in at 0.31 : 0.31 : 0.38.)
+    fn fleet(runs: &[Sim], workers: usize, slots: u32, seed: u64) -> Vec<f64> {
         let now = Instant::now();
         let mut running = vec![0u32; runs.len()];
-        // Per run: its advert number, trials in flight as advertised, a worker waits.
-        let mut adv = vec![(0u64, 0u32, true); runs.len()];
-        let mut fleet: Vec<(Share, Vec<(usize, u32)>)> = (0..workers)
-            .map(|w| (Share::new(w as u64), Vec::new()))
+        // Per run: its advert number, a worker waits, it advertised trials
+        // ready, the trials in flight it advertised.
+        let mut adv = vec![(0u64, true, false, 0u32); runs.len()];
+        // Per worker: its share, and the trials it holds (run, start, end).
+        type Held = Vec<(usize, u32, u32)>;
+        let mut fleet: Vec<(Share, Held)> = (0..workers)
+            .map(|w| (Share::new(seed * 1000 + w as u64), Vec::new()))
             .collect();
         let mut slot_ticks = vec![0.0; runs.len()];
-        let ready = |i: usize, running: &[u32]| runs[i].1.saturating_sub(running[i]);
-        for tick in 0..4000u32 {
-            for (i, (p, _)) in runs.iter().enumerate() {
+        let ready = |i: usize, running: &[u32]| runs[i].window.saturating_sub(running[i]);
+        let mut last_moved = vec![0u32; runs.len()];
+        for tick in 0..40_000u32 {
+            for (i, run) in runs.iter().enumerate() {
                 let r = ready(i, &running);
-                let moved = r > 0 && running[i].abs_diff(adv[i].1) >= (adv[i].1 / 16).max(2);
-                if tick % 20 == 0 || (r > 0 && adv[i].2) || moved {
-                    adv[i] = (adv[i].0 + 1, running[i], false);
-                    let mut a = ad(&format!("r{i}"), *p, r, adv[i].0);
+                let moved = r > 0
+                    && running[i].abs_diff(adv[i].3) >= (adv[i].3 / 16).max(2)
+                    && tick - last_moved[i] >= 5;
+                if moved {
+                    last_moved[i] = tick;
+                }
+                if tick % 200 == 0 || (r > 0 && adv[i].1) || (r > 0) != adv[i].2 || moved {
+                    adv[i] = (adv[i].0 + 1, false, r > 0, running[i]);
+                    let mut a = ad(&format!("r{i}"), run.priority, r, adv[i].0);
                     a.running = running[i];
                     for (share, _) in &mut fleet {
                         share.advert(&a, now);
@@ -322,11 +382,11 @@ mod tests {
             for k in 0..workers {
                 let w = (turn + k) % workers;
                 let (share, held) = &mut fleet[w];
-                held.retain(|&(i, end)| {
+                held.retain(|&(i, start, end)| {
                     if end > tick {
                         return true;
                     }
-                    share.done(&format!("r{i}"));
+                    share.done(&format!("r{i}"), Some(f64::from(end - start)));
                     running[i] -= 1;
                     false
                 });
@@ -336,7 +396,7 @@ mod tests {
                     let got = n.min(ready(i, &running));
                     running[i] += got;
                     if got < n || ready(i, &running) == 0 {
-                        adv[i].2 = true;
+                        adv[i].1 = true;
                     }
                     share.granted(
                         &id,
@@ -345,12 +405,12 @@ mod tests {
                         Some((ready(i, &running), running[i], adv[i].0)),
                     );
                     for k in 0..got {
-                        let jitter = (u32::try_from(w).unwrap_or(0) * 7 + tick * 13 + k * 3) % 7;
-                        held.push((i, tick + 20 + jitter));
+                        let jitter = (u32::try_from(w).unwrap_or(0) * 7 + tick * 13 + k * 3) % 70;
+                        held.push((i, tick, tick + runs[i].ticks + jitter));
                     }
                 }
             }
-            if tick >= 1000 {
+            if tick >= 10_000 {
                 for (t, r) in slot_ticks.iter_mut().zip(&running) {
                     *t += f64::from(*r);
                 }
@@ -368,44 +428,80 @@ mod tests {
     async fn a_fleet_splits_its_slots_by_priority_while_every_run_has_work() {
         // 20 workers × 10 slots, runs of priorities 1, 2, 3, 1, 2, 3, each
         // with trials always ready.
-        let runs: Vec<(u32, u32)> = [1, 2, 3, 1, 2, 3].map(|p| (p, u32::MAX)).to_vec();
-        let s = shares(&fleet(&runs, 20, 10));
-        for ((p, _), share) in runs.iter().zip(&s) {
-            let due = f64::from(*p) / 12.0;
+        let runs = [1, 2, 3, 1, 2, 3].map(backlogged);
+        for seed in 0..3 {
+            let s = shares(&fleet(&runs, 20, 10, seed));
+            for (run, share) in runs.iter().zip(&s) {
+                let due = f64::from(run.priority) / 12.0;
+                assert!(
+                    (share / due - 1.0).abs() < 0.05,
+                    "priority {}: {share:.4} of the slot-ticks, its share {due:.4} ({s:?})",
+                    run.priority
+                );
+            }
+        }
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_run_that_cannot_use_its_share_leaves_it_to_the_others_by_priority() {
+        // The priority-3 run never has more than 30 trials in flight (its
+        // share of 200 slots would be 100): it keeps most of them in flight,
+        // and the other two share the rest 2 : 1. (Taking the runs below
+        // their share by the advertised counts gave 1.6–1.8 : 1 here, for
+        // every seed: docs/fleet.md.)
+        let runs = [
+            backlogged(1),
+            backlogged(2),
+            Sim {
+                priority: 3,
+                window: 30,
+                ticks: 200,
+            },
+        ];
+        for seed in 0..4 {
+            let s = fleet(&runs, 20, 10, seed);
+            let total: f64 = s.iter().sum();
+            let slots = |i: usize| 200.0 * s[i] / total;
             assert!(
-                (share / due - 1.0).abs() < 0.1,
-                "priority {p}: {share:.4} of the slot-ticks, its share {due:.4} ({s:?})"
+                slots(2) > 20.0,
+                "the window-bound run: {:.1} slots of 30",
+                slots(2)
+            );
+            let ratio = slots(1) / slots(0);
+            assert!(
+                (ratio / 2.0 - 1.0).abs() < 0.05,
+                "seed {seed}: priority 2 : priority 1 = {ratio:.3} ({s:?})"
             );
         }
     }
 
     #[tokio::test(start_paused = true)]
-    async fn a_run_that_cannot_use_its_share_leaves_it_to_the_others() {
-        // The priority-3 run never has more than 30 trials in flight (its share
-        // of 200 slots would be 100): it keeps most of them in flight (a slot
-        // that frees goes to it only once workers hear it has a trial ready),
-        // and the other two take the rest, priority 2 more than priority 1.
-        // (Not yet 2 : 1 — about 1.6 : 1 here: what the window-bound run
-        // leaves goes more to the smaller share; docs/fleet.md.)
-        let runs = [(1, u32::MAX), (2, u32::MAX), (3, 30)];
-        let s = fleet(&runs, 20, 10);
-        let total: f64 = s.iter().sum();
-        let slots = |i: usize| 200.0 * s[i] / total;
-        assert!(
-            slots(2) > 24.0,
-            "the window-bound run: {:.1} slots of 30",
-            slots(2)
-        );
-        let ratio = slots(1) / slots(0);
-        assert!(ratio > 1.5, "priority 2 : priority 1 = {ratio:.3} ({s:?})");
+    async fn runs_share_trial_seconds_by_priority_whatever_their_trials_last() {
+        // Two runs of one priority, one with trials three times as long: each
+        // still holds half the slots (so half the fleet's trial-seconds),
+        // not three quarters.
+        let runs = [
+            backlogged(1),
+            Sim {
+                priority: 1,
+                window: u32::MAX,
+                ticks: 600,
+            },
+            backlogged(2),
+        ];
+        let s = shares(&fleet(&runs, 20, 10, 0));
+        for (run, share) in runs.iter().zip(&s) {
+            let due = f64::from(run.priority) / 4.0;
+            assert!((share / due - 1.0).abs() < 0.05, "{s:?}");
+        }
     }
 
     #[tokio::test(start_paused = true)]
     async fn runs_of_one_priority_get_one_share_whatever_their_names() {
         // The lottery's draws are uniform: the first run by name is not
         // favoured (a biased hand-written generator gave 71 : 66 : 63 here).
-        let runs = [(2, u32::MAX), (2, u32::MAX), (2, u32::MAX)];
-        let s = shares(&fleet(&runs, 20, 10));
+        let runs = [2, 2, 2].map(backlogged);
+        let s = shares(&fleet(&runs, 20, 10, 0));
         for share in &s {
             assert!((share * 3.0 - 1.0).abs() < 0.05, "{s:?}");
         }
@@ -439,24 +535,26 @@ mod tests {
         let asks = s.pick(4, 3600.0);
         assert_eq!(asks, [("a".to_string(), 4)], "b had nothing ready");
         s.granted("a", 4, 4, Some((1_000_000, 4, 1)));
-        // b has work again: as slots free, they go to b until both hold
-        // half; nothing is owed to b for the time it was idle.
+        // b has work again: the slots that free go to a and b alike; nothing
+        // is owed to b for the time it was idle.
         s.advert(&ad("b", 1, 1_000_000, 2), now);
-        let mut a = ad("a", 1, 1_000_000, 2);
-        a.running = 4;
-        s.advert(&a, now);
+        s.advert(&ad("a", 1, 1_000_000, 2), now);
         let mut held = vec!["a"; 4];
-        for _ in 0..8 {
+        let mut to_b = 0;
+        for _ in 0..400 {
             let run = held.remove(0);
-            s.done(run);
+            s.done(run, Some(1.0));
             let asks = s.pick(1, 3600.0);
             let (id, n) = asks[0].clone();
-            let running = s.runs[&id].running + n;
-            s.granted(&id, n, n, Some((1_000_000, running, 2)));
-            held.push(if id == "a" { "a" } else { "b" });
+            s.granted(&id, n, n, Some((1_000_000, 2, 2)));
+            if id == "b" {
+                to_b += 1;
+                held.push("b");
+            } else {
+                held.push("a");
+            }
         }
-        let b = held.iter().filter(|r| **r == "b").count();
-        assert_eq!(b, 2, "half of the 4 slots each: {held:?}");
+        assert!((180..=220).contains(&to_b), "{to_b} of 400 slots to b");
     }
 
     #[tokio::test(start_paused = true)]
@@ -497,6 +595,23 @@ mod tests {
     }
 
     #[tokio::test(start_paused = true)]
+    async fn a_run_not_yet_run_here_is_weighed_by_its_duration() {
+        // a's trials took 2 s of wall time per 10 s simulated here; b (20 s
+        // simulated) has not run here yet, so it is expected to take 4 s:
+        // of 12 slots, at one priority, a gets 8 and b 4.
+        let mut s = Share::new(3);
+        let now = Instant::now();
+        s.advert(&ad("a", 1, 1_000, 1), now);
+        let mut b = ad("b", 1, 1_000, 1);
+        b.duration_s = 20.0;
+        s.advert(&b, now);
+        s.done("a", Some(2.0));
+        let mut asks = s.pick(12, 3600.0);
+        asks.sort();
+        assert_eq!(asks, [("a".to_string(), 8), ("b".to_string(), 4)]);
+    }
+
+    #[tokio::test(start_paused = true)]
     async fn paused_long_unservable_and_silent_runs_are_skipped() {
         let mut s = Share::new(0);
         let now = Instant::now();
@@ -533,7 +648,7 @@ mod tests {
         // iteration and advertised 8; the worker hears 8 first.
         s.advert(&ad("a", 1, 6, 8), now);
         s.granted("a", 1, 1, Some((0, 1, 7)));
-        s.done("a");
+        s.done("a", Some(1.0));
         assert_eq!(s.pick(1, 3600.0), [("a".to_string(), 1)]);
         // A short grant as of the newest advert idles it until a newer one.
         s.granted("a", 1, 0, Some((0, 0, 8)));
