@@ -34,6 +34,8 @@ pub struct Snapshot {
     pub best: Option<Best>,
     /// CLOP's mean (Optim.2), named.
     pub optim2: Vec<(String, f64)>,
+    /// Iterations decided when `optim2` was computed.
+    pub optim2_decided: u64,
     /// Every planned iteration decided.
     pub finished: bool,
     /// The journaled priority.
@@ -42,18 +44,40 @@ pub struct Snapshot {
     pub paused: bool,
 }
 
+/// A running coordinator refits CLOP's mean (Optim.2, which watchers see)
+/// once every this many decisions: the fit costs more as the history grows
+/// (at 3,000 outcomes it was most of the run's thread's CPU per decision).
+pub const OPTIM2_EVERY: u64 = 10;
+
 impl Snapshot {
-    /// Reads it off `run`.
+    /// Reads it off `run`, CLOP's mean included.
     #[must_use]
     pub fn of(run: &Run) -> Self {
+        Self::after(run, None)
+    }
+
+    /// Reads it off `run`; CLOP's mean is taken from `last` while the run
+    /// goes on and fewer than [`OPTIM2_EVERY`] decisions came since it was
+    /// computed.
+    #[must_use]
+    pub fn after(run: &Run, last: Option<&Snapshot>) -> Self {
         let ev = run.evolve();
+        let decided = ev.decided();
+        let finished = ev.finished();
+        let (optim2, optim2_decided) = match last {
+            Some(l) if !finished && decided < l.optim2_decided + OPTIM2_EVERY => {
+                (l.optim2.clone(), l.optim2_decided)
+            }
+            _ => (ev.named(&ev.optim2()), decided),
+        };
         Self {
             opened: ev.opened(),
-            decided: ev.decided(),
+            decided,
             counts: ev.counts(),
             best: ev.best_wire(),
-            optim2: ev.named(&ev.optim2()),
-            finished: ev.finished(),
+            optim2,
+            optim2_decided,
+            finished,
             priority: run.priority(),
             paused: run.paused(),
         }
@@ -247,6 +271,7 @@ fn serve(
 ) {
     let hold = hold_hook();
     let mut applied = 0u64;
+    let mut last: Option<Snapshot> = None;
     while let Ok(cmd) = cmds.recv() {
         if let Some((ms, n)) = hold {
             if matches!(cmd, Cmd::Outcome { .. }) {
@@ -272,7 +297,11 @@ fn serve(
                 match run.on_outcome(o.iteration, o.trial, o.seed, o.measurement(), &o.worker) {
                     Ok((counted, fx)) => {
                         let took_s = clock.elapsed().as_secs_f64();
-                        let snapshot = (!fx.is_empty()).then(|| Box::new(Snapshot::of(&run)));
+                        let snapshot = (!fx.is_empty()).then(|| {
+                            let s = Snapshot::after(&run, last.as_ref());
+                            last = Some(s.clone());
+                            Box::new(s)
+                        });
                         Reply::Applied {
                             outcome: o,
                             counted,
@@ -310,12 +339,14 @@ fn serve(
                         }
                     }
                 };
+                let s = Snapshot::of(&run);
+                last = Some(s.clone());
                 Reply::Controlled {
                     tag,
                     action,
                     by,
                     result,
-                    snapshot: Box::new(Snapshot::of(&run)),
+                    snapshot: Box::new(s),
                 }
             }
         };

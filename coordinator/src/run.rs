@@ -1107,6 +1107,59 @@ mod tests {
     }
 
     #[test]
+    fn the_status_refits_optim2_every_ten_decisions_and_at_the_end() {
+        use crate::decider::{Snapshot, OPTIM2_EVERY};
+        let dir = tmp("optim2-cadence");
+        let (mut run, effects) = Run::open(&dir, exp(), EXP, None).unwrap();
+        let mut queue: std::collections::VecDeque<TrialRequest> = Default::default();
+        let enqueue = |run: &Run, effects: &[Effect], q: &mut std::collections::VecDeque<_>| {
+            for e in effects {
+                if let Effect::Dispatch(o, ks) = e {
+                    q.extend(ks.iter().map(|k| run.request(o, *k, 0).unwrap()));
+                }
+            }
+        };
+        enqueue(&run, &effects, &mut queue);
+        let mut last: Option<Snapshot> = None;
+        let mut refits = Vec::new();
+        while let Some(req) = queue.pop_front() {
+            let (_, fx) = run
+                .on_outcome(req.iteration, req.trial, req.seed, synthetic(&req), "w")
+                .unwrap();
+            enqueue(&run, &fx, &mut queue);
+            if !fx.iter().any(|e| matches!(e, Effect::Decided(_))) {
+                continue;
+            }
+            let s = Snapshot::after(&run, last.as_ref());
+            let fresh = Snapshot::of(&run);
+            assert!(s.decided - s.optim2_decided < OPTIM2_EVERY, "{s:?}");
+            if s.optim2_decided == s.decided {
+                refits.push(s.decided);
+                assert_eq!(s.optim2, fresh.optim2);
+            } else {
+                let l = last.as_ref().unwrap();
+                assert_eq!((&s.optim2, s.optim2_decided), (&l.optim2, l.optim2_decided));
+            }
+            assert_eq!(
+                Snapshot {
+                    optim2: fresh.optim2.clone(),
+                    optim2_decided: fresh.optim2_decided,
+                    ..s.clone()
+                },
+                fresh,
+                "all but CLOP's mean is current"
+            );
+            last = Some(s);
+        }
+        assert!(run.evolve().finished());
+        assert_eq!(
+            refits,
+            [1, 11, 21, 31, 40],
+            "and the finished run's is current"
+        );
+    }
+
+    #[test]
     fn duplicates_count_once_and_bad_outcomes_change_nothing() {
         let dir = tmp("dup");
         let (mut run, effects) = Run::open(&dir, exp(), EXP, None).unwrap();

@@ -238,6 +238,7 @@ impl State {
             rejects: r,
             best: self.snap.best.clone(),
             optim2: self.snap.optim2.clone(),
+            optim2_decided: self.snap.optim2_decided,
             workers: u32::try_from(self.sched.workers()).unwrap_or(u32::MAX),
             trials_per_s: rate,
             finished: self.snap.finished,

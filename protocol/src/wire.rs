@@ -740,6 +740,10 @@ pub struct RunStatus {
     pub best: Option<Best>,
     /// CLOP's mean recommendation (Optim.2), external units.
     pub optim2: Vec<(String, f64)>,
+    /// Iterations decided when `optim2` was computed: a running coordinator
+    /// refits CLOP's mean every few decisions, not after each (its cost grows
+    /// with the history); a finished, stopped or controlled run's is current.
+    pub optim2_decided: u64,
     /// Workers currently alive.
     pub workers: u32,
     /// Trials completed per wall-clock second, recent average.
@@ -764,6 +768,9 @@ impl WireMessage for RunStatus {
             return Err(("accepts", "decision counts do not add up to decided".into()));
         }
         param_list("optim2", &self.optim2)?;
+        if self.optim2_decided > self.decided {
+            return Err(("optim2_decided", "more than decided".into()));
+        }
         if let Some(b) = &self.best {
             param_list("best.params", &b.params)?;
             b.stats.check()?;
@@ -840,7 +847,7 @@ mod tests {
             let p = WorkerPresence { worker: w.clone(), slots, busy: slots / 2, version: "0.1.0".into() };
             prop_assert_eq!(WorkerPresence::decode(&p.encode().unwrap()), Ok(p));
             let s = RunStatus { run: w.clone(), id: format!("{w}-id"), priority: 2, state: RunState::Running, planned: 500, opened: a + e + r + 2, decided: a + e + r, accepts: a,
-                                equivalents: e, rejects: r, best: None, optim2: ps, workers: 3, trials_per_s: 1.5, finished: false };
+                                equivalents: e, rejects: r, best: None, optim2: ps, optim2_decided: a + e + r, workers: 3, trials_per_s: 1.5, finished: false };
             prop_assert_eq!(RunStatus::decode(&s.encode().unwrap()), Ok(s.clone()));
             prop_assert_eq!(RunStatus::from_json(&s.to_json().unwrap()), Ok(s));
         }
