@@ -243,10 +243,11 @@ pub struct FleetBenchArgs {
     #[arg(long, default_value_t = 1000)]
     pub trial_ms: u64,
     /// Iterations per run. The shares are measured while every run has trials
-    /// ready, i.e. until the first run ends: at the defaults 300 iterations
-    /// give a window of about 41 s; 100 give 13 s, over which the window's
-    /// own noise spreads the worst share error by ±10 % (docs/fleet.md).
-    #[arg(long, default_value_t = 300)]
+    /// ready, i.e. until the first run ends: at the defaults 600 iterations
+    /// give a window of about 82 s; 300 give 41 s and 100 give 13 s, over
+    /// which the window's own noise spreads the worst share error by about
+    /// ±3 % and ±10 % (docs/fleet.md).
+    #[arg(long, default_value_t = 600)]
     pub iterations: u64,
     /// Trials per iteration.
     #[arg(long, default_value_t = 10)]
