@@ -92,13 +92,11 @@ impl Share {
             && r.duration_s <= max_duration_s
     }
 
-    /// Wall seconds a trial of `r` is expected to hold a slot here: its own
-    /// mean once one ran; before, its simulated duration times the mean
-    /// ratio of wall to simulated time of the runs that did (1 if none did).
-    fn wall_of(&self, r: &RunInfo) -> f64 {
-        if let Some(w) = r.wall_s {
-            return w.max(1e-6);
-        }
+    /// Each run's odds in the draws: its priority over the wall seconds a
+    /// trial of it is expected to hold a slot here — its own mean once one
+    /// ran; before, its simulated duration times the mean ratio of wall to
+    /// simulated time of the runs that did (1 if none did).
+    fn odds(&self) -> BTreeMap<&String, f64> {
         let (mut sum, mut n) = (0.0, 0.0);
         for o in self.runs.values() {
             if let Some(w) = o.wall_s {
@@ -109,7 +107,13 @@ impl Share {
             }
         }
         let ratio = if n > 0.0 { sum / n } else { 1.0 };
-        (r.duration_s * ratio).max(1e-6)
+        self.runs
+            .iter()
+            .map(|(id, r)| {
+                let wall = r.wall_s.unwrap_or(r.duration_s * ratio).max(1e-6);
+                (id, r.priority / wall)
+            })
+            .collect()
     }
 
     /// A run's advert arrived.
@@ -154,6 +158,7 @@ impl Share {
     pub fn pick(&mut self, free: u32, max_duration_s: f64) -> Vec<(String, u32)> {
         let offset: f64 = self.rng.random();
         let targets = self.targets(max_duration_s);
+        let odds = self.odds();
         let mut asks: BTreeMap<String, u32> = BTreeMap::new();
         for slot in 0..free {
             let n = |id: &String| asks.get(id).copied().unwrap_or(0);
@@ -167,7 +172,7 @@ impl Share {
                 .map(|(id, r)| {
                     let have = f64::from(r.running.saturating_add(r.asking).saturating_add(n(id)));
                     let below = targets.get(id).copied().unwrap_or(0.0) - have >= 1.0;
-                    (r.priority / self.wall_of(r), id, below)
+                    (odds.get(id).copied().unwrap_or(0.0), id, below)
                 })
                 .collect();
             let any_below = open.iter().any(|o| o.2);
@@ -195,7 +200,7 @@ impl Share {
             };
             *asks.entry(id).or_default() += 1;
         }
-        drop(targets);
+        drop((targets, odds));
         for (id, n) in &asks {
             if let Some(r) = self.runs.get_mut(id) {
                 r.asking = *n;
