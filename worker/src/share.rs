@@ -251,10 +251,8 @@ impl Share {
             r.asking = r.asking.saturating_sub(asked);
             r.held += got;
             match answer {
-                Some((_, _, seq)) if seq < r.seq => {
-                    r.ready = r.ready.saturating_sub(got);
-                    r.running += got;
-                }
+                // The newer advert's count of trials in flight already holds these.
+                Some((_, _, seq)) if seq < r.seq => r.ready = r.ready.saturating_sub(got),
                 Some((ready, running, seq)) => {
                     r.ready = ready;
                     r.running = running;
@@ -653,6 +651,7 @@ mod tests {
         // iteration and advertised 8; the worker hears 8 first.
         s.advert(&ad("a", 1, 6, 8), now);
         s.granted("a", 1, 1, Some((0, 1, 7)));
+        assert_eq!(s.runs["a"].running, 0, "advert 8's count stands");
         s.done("a", Some(1.0));
         assert_eq!(s.pick(1, 3600.0), [("a".to_string(), 1)]);
         // A short grant as of the newest advert idles it until a newer one.
