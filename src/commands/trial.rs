@@ -9,7 +9,7 @@ use worker::nao::{
     model::NaoModel,
     replay::Replayed,
     sim::{SimSettings, CYCLE_S},
-    trial::{self, Batch, NaoTrial},
+    trial::{self, Batch, NaoTrial, StopExcess},
 };
 
 use crate::{
@@ -113,6 +113,11 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             "ey": s.ey,
             "trials": runs.iter().map(trial_json).collect::<Vec<_>>(),
             "diverged": diverged,
+            "worst_stop_excess": worst_stop_excess(&runs).map(|(t, e)| {
+                let mut v = stop_excess_json(e);
+                v["seed"] = serde_json::json!(t.seed);
+                v
+            }),
             "wall_s": wall,
         });
         outln!("{v}");
@@ -133,6 +138,16 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         );
         if diverged > 0 {
             outln!("{diverged} of the falls were the physics diverging (counted as falls, no distance)");
+        }
+        match worst_stop_excess(&runs) {
+            Some((t, e)) => outln!(
+                "farthest past a stop: {:.2}° ({} at {:.2} s, seed {})",
+                e.rad.to_degrees(),
+                e.joint,
+                e.time_s,
+                t.seed
+            ),
+            None => outln!("no joint went past its stops"),
         }
         outln!(
             "{:.1} trials/s on {threads} threads ({wall:.2} s wall)",
@@ -268,7 +283,24 @@ fn trial_json(t: &NaoTrial) -> serde_json::Value {
         "fall_time_s": m.fall_time_s,
         "diverged": t.diverged,
         "sim_time_s": m.sim_time_s,
+        "stop_excess": t.stop_excess.iter().map(stop_excess_json).collect::<Vec<_>>(),
     })
+}
+
+/// A joint's worst overrun past its stops as `trial --json` lists it.
+fn stop_excess_json(e: &StopExcess) -> serde_json::Value {
+    serde_json::json!({
+        "deg": e.rad.to_degrees(),
+        "joint": e.joint,
+        "time_s": e.time_s,
+    })
+}
+
+/// The trial whose joint went farthest past a stop, if any did.
+fn worst_stop_excess(runs: &[NaoTrial]) -> Option<(&NaoTrial, &StopExcess)> {
+    runs.iter()
+        .flat_map(|t| t.stop_excess.iter().map(move |e| (t, e)))
+        .max_by(|a, b| a.1.rad.total_cmp(&b.1.rad))
 }
 
 /// A parameter set as a JSON object of name → value.

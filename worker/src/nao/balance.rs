@@ -163,7 +163,7 @@ mod tests {
     use super::*;
     use crate::nao::model::NaoModel;
     use crate::nao::sim::SimSettings;
-    use crate::nao::trial::{run, run_many, run_observed, Batch, Engine, NaoTrial, WalkEngine};
+    use crate::nao::trial::{run, run_many, Batch, Engine, NaoTrial, WalkEngine};
     use crate::nao::walk::Gait;
     use protocol::params::ParamValues;
 
@@ -260,62 +260,28 @@ mod tests {
         assert_ne!(a.measurement.x_m.to_bits(), open.measurement.x_m.to_bits());
     }
 
-    /// The worst excess over its stops during one trial, rad: of the hip
-    /// yaw-pitch joints (`le1`) and of every other joint, each with where.
-    fn worst_excess(params: &ParamValues, seed: u64) -> [(f64, String); 2] {
-        let model = NaoModel::with_params(0, params).unwrap();
-        let mut worst = [(0.0, String::new()), (0.0, String::new())];
-        run_observed(
-            0,
-            params,
-            seed,
-            10.0,
-            SimSettings::default(),
-            closed(),
-            &mut |_, p| {
-                for (j, a) in model.joints.iter().zip(&p.joint_angles_rad) {
-                    let e = (j.limits_rad.0 - a).max(a - j.limits_rad.1);
-                    let w = &mut worst[usize::from(!j.name.ends_with("le1"))];
-                    if e > w.0 {
-                        *w = (e, format!("{} at {:.2} s", j.name, p.time_s));
-                    }
-                }
-            },
-        )
-        .unwrap();
-        worst
+    /// The worst excess over its stops during one trial with physics
+    /// `settings`: of the hip yaw-pitch joints (`le1`) and of every other
+    /// joint, in degrees, each with where.
+    fn worst_excess(params: &ParamValues, seed: u64, settings: SimSettings) -> [(f64, String); 2] {
+        let t = run(0, params, seed, 10.0, settings, closed()).unwrap();
+        [true, false].map(|yaw_pitch| {
+            t.stop_excess
+                .iter()
+                .filter(|e| e.joint.ends_with("le1") == yaw_pitch)
+                .max_by(|a, b| a.rad.total_cmp(&b.rad))
+                .map_or((0.0, String::new()), |e| {
+                    (
+                        e.rad.to_degrees(),
+                        format!("{} at {:.2} s", e.joint, e.time_s),
+                    )
+                })
+        })
     }
 
-    /// Every joint but the hip yaw-pitch stays within 1° of its stops on the
-    /// expert set and within 2.5° over the 16 corners of experiment 2's L with
-    /// its shortest steps and its centre (others at expert). The issue asks
-    /// for 2°: that held until the trials became CPU-independent (new bits),
-    /// since when the deepest-crouch, highest-lift corner (ThighRelHip2_Z
-    /// −0.08, ratio_flexion 0.6, long_offset 0.03, height_lift 0.07) takes
-    /// its left ankle roll 2.26° past its stop at 8.46 s while walking. The hip
-    /// yaw-pitch, held at 0 by the plan 1° below its stop, is loaded through
-    /// the pitch half of its axis by the stance hip's balancing torque beyond
-    /// what its motor holds and yields into the stop, where rapier's limit
-    /// row only pushes back once it is past: bounded at 2° on the expert set
-    /// and 4° over that half of L (without the feedback it stays under 1.2°).
-    /// L's 16 corners with 0.15 m steps overrun by up to 8° (ankle pitch) as
-    /// they fall in the first seconds: `docs/walk.md` has the measurements.
-    #[test]
-    fn joints_stay_near_their_stops_on_the_expert_set_and_the_short_step_half_of_l() {
-        let [yp, other] = worst_excess(&ParamValues::default(), 3);
-        let deg = |e: f64| e.to_degrees();
-        assert!(
-            other.0 <= 1f64.to_radians(),
-            "expert: {:.2}° {}",
-            deg(other.0),
-            other.1
-        );
-        assert!(
-            yp.0 <= 2f64.to_radians(),
-            "expert: {:.2}° {}",
-            deg(yp.0),
-            yp.1
-        );
+    /// Experiment 2's L at its corners (those with the shortest steps only,
+    /// or all 32) and its centre, named.
+    fn corners_of_l(all: bool) -> Vec<Vec<(String, f64)>> {
         let exp = protocol::Experiment::from_toml(include_str!(
             "../../../experiments/physical-technical.toml"
         ))
@@ -323,7 +289,7 @@ mod tests {
         let l = &exp.parameter;
         let short = l.iter().position(|p| p.name == "xlength_step_max").unwrap();
         let mut sets: Vec<Vec<(String, f64)>> = (0..1u32 << l.len())
-            .filter(|corner| corner >> short & 1 == 0)
+            .filter(|corner| all || corner >> short & 1 == 0)
             .map(|corner| {
                 l.iter()
                     .enumerate()
@@ -343,21 +309,69 @@ mod tests {
                 .map(|p| (p.name.clone(), (p.lower + p.upper) / 2.0))
                 .collect(),
         );
+        sets
+    }
+
+    /// At the farm's physics (2 × 10 ms) every joint but the hip yaw-pitch
+    /// stays within 1° of its stops on the expert set and within 2.5° over
+    /// the 16 corners of experiment 2's L with its shortest steps and its
+    /// centre; the hip yaw-pitch within 2° and 4°. The issue's bounds (1°,
+    /// 2° over all of L) are not met at 10 ms: the deepest-crouch,
+    /// highest-lift corner takes its left ankle roll 2.26° past its stop, the
+    /// hip yaw-pitch of the landing leg yields into its stop by 1.2–1.7° at
+    /// every step (1.2–1.4° with the feedback off), and L's corners with
+    /// 0.15 m steps overrun by up to 8° as they fall. Rapier engages a limit
+    /// row only once the joint is past the stop, and its PGS does not hold the
+    /// row against a landing within a 10 ms step: with 2 ms steps every bound
+    /// holds (the next test). `docs/walk.md` has the measurements.
+    #[test]
+    fn joints_stay_near_their_stops_on_the_expert_set_and_the_short_step_half_of_l() {
+        let farm = SimSettings::default();
+        let [yp, other] = worst_excess(&ParamValues::default(), 3, farm);
+        assert!(other.0 <= 1.0, "expert: {:.2}° {}", other.0, other.1);
+        assert!(yp.0 <= 2.0, "expert: {:.2}° {}", yp.0, yp.1);
+        let sets = corners_of_l(false);
         assert_eq!(sets.len(), 17);
         let (mut worst_yp, mut worst_other) = (0.0f64, 0.0f64);
         for named in &sets {
             let p = ParamValues::from_named(named).unwrap();
-            let [yp, other] = worst_excess(&p, 1);
+            let [yp, other] = worst_excess(&p, 1, farm);
             worst_yp = worst_yp.max(yp.0);
             worst_other = worst_other.max(other.0);
-            let (o, y) = (deg(other.0), deg(yp.0));
-            assert!(o <= 2.5, "{named:?}: {o:.2}° {}", other.1);
-            assert!(y <= 4.0, "{named:?}: hip yaw-pitch {y:.2}° {}", yp.1);
+            assert!(other.0 <= 2.5, "{named:?}: {:.2}° {}", other.0, other.1);
+            assert!(
+                yp.0 <= 4.0,
+                "{named:?}: hip yaw-pitch {:.2}° {}",
+                yp.0,
+                yp.1
+            );
         }
-        println!(
-            "over L: hip yaw-pitch {:.2}°, others {:.2}°",
-            deg(worst_yp),
-            deg(worst_other)
-        );
+        println!("over L: hip yaw-pitch {worst_yp:.2}°, others {worst_other:.2}°");
+    }
+
+    /// The overruns are the 10 ms physics step's: with 2 ms steps (10 per
+    /// cycle) every joint, the hip yaw-pitch too, keeps the issue's bounds —
+    /// within 1° of its stops on the expert set (five seeds) and within 2°
+    /// over all 32 corners of experiment 2's L and its centre, long steps
+    /// and falls included (measured: 1.03° at worst; at 10 ms up to 7.9°).
+    #[test]
+    fn with_two_millisecond_steps_every_joint_keeps_the_bounds_over_all_of_l() {
+        let fine = SimSettings {
+            substeps: 10,
+            ..SimSettings::default()
+        };
+        for seed in 1..=5 {
+            for (deg, at) in worst_excess(&ParamValues::default(), seed, fine) {
+                assert!(deg <= 1.0, "expert, seed {seed}: {deg:.2}° {at}");
+            }
+        }
+        let sets = corners_of_l(true);
+        assert_eq!(sets.len(), 33);
+        for named in &sets {
+            let p = ParamValues::from_named(named).unwrap();
+            for (deg, at) in worst_excess(&p, 1, fine) {
+                assert!(deg <= 2.0, "{named:?}: {deg:.2}° {at}");
+            }
+        }
     }
 }

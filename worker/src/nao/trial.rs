@@ -127,6 +127,53 @@ pub struct NaoTrial {
     /// Whether the fall was the physics diverging ([`SimError::Diverged`]),
     /// counted as a fall with no distance.
     pub diverged: bool,
+    /// Every joint that went past one of its stops (read at the end of each
+    /// cycle), at its worst, in model order.
+    pub stop_excess: Vec<StopExcess>,
+}
+
+/// How far a joint went past one of its stops during a trial, at its worst.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StopExcess {
+    /// The joint's name.
+    pub joint: String,
+    /// The excess, rad (> 0).
+    pub rad: f64,
+    /// When, simulated s.
+    pub time_s: f64,
+}
+
+/// Each joint's worst excess over its stops so far, rad, and when.
+struct Overruns(Vec<Option<(f64, f64)>>);
+
+impl Overruns {
+    fn new(model: &NaoModel) -> Self {
+        Self(vec![None; model.joints.len()])
+    }
+
+    fn fold(&mut self, model: &NaoModel, angles: &[f64], t: f64) {
+        for ((j, a), w) in model.joints.iter().zip(angles).zip(&mut self.0) {
+            let e = (j.limits_rad.0 - a).max(a - j.limits_rad.1);
+            if e > w.map_or(0.0, |w| w.0) {
+                *w = Some((e, t));
+            }
+        }
+    }
+
+    fn list(&self, model: &NaoModel) -> Vec<StopExcess> {
+        model
+            .joints
+            .iter()
+            .zip(&self.0)
+            .filter_map(|(j, w)| {
+                w.map(|(rad, time_s)| StopExcess {
+                    joint: j.name.clone(),
+                    rad,
+                    time_s,
+                })
+            })
+            .collect()
+    }
 }
 
 /// Why a trial could not run.
@@ -194,6 +241,7 @@ pub fn run_observed(
     let mut q_now = q0;
     let mut perception = sim.perceive();
     let mut fall_time_s = None;
+    let mut overruns = Overruns::new(&model);
     for k in 0..cycles {
         let t = k as f64 * CYCLE_S;
         let q_next = gait.targets(&rest, t + CYCLE_S);
@@ -232,11 +280,13 @@ pub fn run_observed(
                         sim_time_s: t,
                     },
                     diverged: true,
+                    stop_excess: overruns.list(&model),
                 });
             }
             Err(e) => return Err(e.into()),
         };
         q_now = q_next;
+        overruns.fold(&model, &perception.joint_angles_rad, perception.time_s);
         observe(&sim, &perception);
         if fallen(&perception) {
             fall_time_s = Some(perception.time_s);
@@ -254,6 +304,7 @@ pub fn run_observed(
             sim_time_s: perception.time_s,
         },
         diverged: false,
+        stop_excess: overruns.list(&model),
     })
 }
 
