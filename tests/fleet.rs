@@ -12,6 +12,10 @@ use std::{
 };
 
 use coordinator::journal::{Control, Journal, Record};
+use protocol::{
+    keys::FleetKeys,
+    wire::{WireMessage, WorkGrant, WorkRequest},
+};
 use util::{bits, decided, events, fails, naofarm, root, scratch, succeed, Proc};
 
 const TIMEOUT: Duration = Duration::from_secs(120);
@@ -636,8 +640,27 @@ fn fingerprint(faulty: bool) -> u64 {
     u64::from_str_radix(text.split(' ').next().unwrap(), 16).unwrap()
 }
 
+/// Work requests the test sends as a worker of an older build and another
+/// fingerprint.
+const OLD_BUILD_ASKS: u64 = 200;
+
+/// A zenoh client session on `ep` (loopback, no scouting).
+fn client(ep: &str) -> zenoh::Session {
+    use zenoh::Wait;
+    let mut cfg = zenoh::Config::default();
+    for (k, v) in [
+        ("mode", "\"client\"".to_string()),
+        ("scouting/multicast/enabled", "false".to_string()),
+        ("connect/endpoints", format!("[\"{ep}\"]")),
+    ] {
+        cfg.insert_json5(k, &v).unwrap();
+    }
+    zenoh::open(cfg).wait().unwrap()
+}
+
 #[test]
 fn a_run_takes_one_worker_fingerprint_and_a_resume_without_it_ends() {
+    use zenoh::Wait;
     let dir = scratch("fleet-fingerprint");
     let (ours, other) = (fingerprint(false), fingerprint(true));
     assert_ne!(ours, other);
@@ -661,6 +684,41 @@ fn a_run_takes_one_worker_fingerprint_and_a_resume_without_it_ends() {
         "faulty-worker",
     );
     wait_line(&faulty, "will not serve the run");
+    // A worker of an older build asks again after each refusal: each is
+    // answered, and none brings an advert (which would bring the next ask).
+    let id = listed(&ep, 1)[0]["id"].as_str().unwrap().to_string();
+    let old_build = client(&ep);
+    let ask = WorkRequest {
+        worker: "old-build".into(),
+        want: 1,
+        slots: 1,
+        busy: 0,
+        max_duration_s: 100.0,
+        version: "0.0.1".into(),
+        fingerprint: other,
+    }
+    .encode()
+    .unwrap();
+    let work = FleetKeys::new("naofarm", &id).work();
+    for _ in 0..OLD_BUILD_ASKS {
+        let replies = old_build
+            .get(&work)
+            .payload(ask.clone())
+            .timeout(TIMEOUT)
+            .wait()
+            .unwrap();
+        let reply = replies.recv().unwrap();
+        let grant = WorkGrant::decode(&reply.result().unwrap().payload().to_bytes()).unwrap();
+        assert!(grant.trials.is_empty(), "{grant:?}");
+        assert!(
+            grant
+                .note
+                .as_deref()
+                .is_some_and(|n| n.starts_with("fingerprint")),
+            "{grant:?}"
+        );
+    }
+    let _ = old_build.close().wait();
     assert!(wait_exit(&mut c).success());
     let recs = records(&out);
     assert_eq!(bits(&decided(&recs)), want, "the history of the run alone");
@@ -683,12 +741,15 @@ fn a_run_takes_one_worker_fingerprint_and_a_resume_without_it_ends() {
     assert!(fp_at < first_outcome, "journaled before any outcome");
     let f = finished(&out);
     let reasons = &f["refused_reasons"];
-    assert!(
-        reasons["work request of another worker fingerprint"]
-            .as_u64()
-            .is_some_and(|n| n >= 1),
+    // Refused once, the faulty worker never asks that run again (it used to
+    // at once, about 2,000 times a second); the old build's asks brought no
+    // adverts.
+    assert_eq!(
+        reasons["work request of another worker fingerprint"].as_u64(),
+        Some(1 + OLD_BUILD_ASKS),
         "{f}"
     );
+    assert!(f["adverts"].as_u64().unwrap() < OLD_BUILD_ASKS, "{f}");
     let err = c.stderr();
     assert!(err.contains(&format!("{other:016x}")), "{err}");
     drop(faulty);

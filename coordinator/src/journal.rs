@@ -732,14 +732,18 @@ impl Journal {
 }
 
 /// Test hook: `NAOFARM_FAULT_JOURNAL_FULL_AFTER=N` makes every append after the
-/// first N bytes fail as a full disk would (run time, never a second build).
+/// first N bytes fail as a full disk would (run time, never a second build;
+/// read once per process).
 fn fault_hook(adding: usize) -> std::io::Result<()> {
     use std::sync::atomic::{AtomicU64, Ordering};
     static WRITTEN: AtomicU64 = AtomicU64::new(0);
-    let Some(limit) = std::env::var("NAOFARM_FAULT_JOURNAL_FULL_AFTER")
-        .ok()
-        .and_then(|v| v.parse::<u64>().ok())
-    else {
+    static LIMIT: std::sync::OnceLock<Option<u64>> = std::sync::OnceLock::new();
+    let limit = LIMIT.get_or_init(|| {
+        std::env::var("NAOFARM_FAULT_JOURNAL_FULL_AFTER")
+            .ok()
+            .and_then(|v| v.parse::<u64>().ok())
+    });
+    let Some(limit) = *limit else {
         return Ok(());
     };
     let total = WRITTEN.fetch_add(adding as u64, Ordering::SeqCst) + adding as u64;

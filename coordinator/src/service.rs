@@ -800,6 +800,7 @@ async fn on_work(st: &mut State, q: &zenoh::query::Query) -> Result<(), ServiceE
         None
     };
     let exp = &st.facts.experiment;
+    let refused = misfit.is_some();
     if let Some(why) = misfit {
         note = Some(why);
     } else if state != RunState::Running {
@@ -854,8 +855,11 @@ async fn on_work(st: &mut State, q: &zenoh::query::Query) -> Result<(), ServiceE
     if trials.is_empty() {
         st.counters.empty_grants += 1;
     }
-    if trials.len() < req.want as usize || st.sched.ready() == 0 {
-        // The worker now believes nothing is ready here: tell it when something is.
+    if !refused && (trials.len() < req.want as usize || st.sched.ready() == 0) {
+        // The worker now believes nothing is ready here: tell it when
+        // something is. Not for a worker of another fingerprint: nothing
+        // changed here, and an advert would only bring its next request
+        // (a worker of an older build asks again after every advert).
         st.advert.2 = true;
     }
     let grant = WorkGrant {

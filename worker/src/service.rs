@@ -258,10 +258,14 @@ pub async fn serve(
                     let (trials, ready) = match grant {
                         Ok(g) => {
                             match &g.note {
-                                Some(note) if note.starts_with("fingerprint") && unservable.insert(run.clone()) => {
-                                    tracing::warn!(run, note, "this worker will not serve the run");
+                                // The run's fingerprint is journaled and this
+                                // worker's fixed: it is never asked again.
+                                Some(note) if note.starts_with("fingerprint") => {
+                                    if unservable.insert(run.clone()) {
+                                        tracing::warn!(run, note, "this worker will not serve the run");
+                                    }
+                                    share.unservable(&run, note);
                                 }
-                                Some(note) if note.starts_with("fingerprint") => {}
                                 Some(note) => tracing::debug!(run, note, "short grant"),
                                 None => {}
                             }

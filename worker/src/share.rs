@@ -281,7 +281,8 @@ impl Share {
         }
     }
 
-    /// This worker will not serve `run` (its trials are beyond a limit).
+    /// This worker will not serve `run`: its trials are beyond a limit, or
+    /// the run is pinned to another worker fingerprint.
     pub fn unservable(&mut self, run: &str, why: &str) {
         if let Some(r) = self.runs.get_mut(run) {
             r.unservable = Some(why.to_string());
