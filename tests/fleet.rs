@@ -568,15 +568,7 @@ fn watch_says_when_two_sessions_claim_one_run() {
     let mut status = runs[0].clone();
     status.as_object_mut().unwrap().remove("claims");
     let body = status.to_string();
-    let mut cfg = zenoh::Config::default();
-    for (k, v) in [
-        ("mode", "\"client\"".to_string()),
-        ("scouting/multicast/enabled", "false".to_string()),
-        ("connect/endpoints", format!("[\"{ep}\"]")),
-    ] {
-        cfg.insert_json5(k, &v).unwrap();
-    }
-    let stranger = zenoh::open(cfg).wait().unwrap();
+    let stranger = client(&ep);
     let _forged = stranger
         .declare_queryable(format!("naofarm/{run}/{id}/status"))
         .callback(move |q| {
