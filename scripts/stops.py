@@ -9,19 +9,17 @@ hip yaw-pitch (`le1`) and of any other joint, on the expert set and over L,
 how many of L's 33 trials fell, and what the expert set walked (5 trials).
 
     scripts/stops.py [--bin target/release/naofarm] [--substeps 2 3 5 10]
+
+(from the repository's root: it reads L from experiments/physical-technical.toml)
 """
 import argparse
 import itertools
 import json
 import subprocess
+import tomllib
 
-L = [  # experiments/physical-technical.toml
-    ("ThighRelHip2_Z", -0.08, -0.03),
-    ("ratio_flexion", 0.60, 0.95),
-    ("long_offset_MidAnkles_2_Torso_Init", 0.001, 0.030),
-    ("height_lift", 0.025, 0.070),
-    ("xlength_step_max", 0.020, 0.150),
-]
+with open("experiments/physical-technical.toml", "rb") as f:
+    L = [(p["name"], p["lower"], p["upper"]) for p in tomllib.load(f)["parameter"]]
 
 
 def trial(binary, params, substeps, seed, trials):

@@ -233,7 +233,6 @@ pub async fn serve(
     let mut share = Share::new(uuid.as_u64_pair().0);
     let mut held: BTreeMap<Held, TrialRequest> = BTreeMap::new();
     let mut asking: u32 = 0;
-    let mut unservable: BTreeSet<String> = BTreeSet::new();
     let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<Done>();
     let mut summary = WorkerSummary::default();
     let mut beat = tokio::time::interval(cfg.heartbeat);
@@ -260,12 +259,10 @@ pub async fn serve(
                             match &g.note {
                                 // The run's fingerprint is journaled and this
                                 // worker's fixed: it is never asked again.
-                                Some(note) if note.starts_with("fingerprint") => {
-                                    if unservable.insert(run.clone()) {
-                                        tracing::warn!(run, note, "this worker will not serve the run");
-                                    }
-                                    share.unservable(&run, note);
+                                Some(note) if note.starts_with("fingerprint") && share.unservable(&run, note) => {
+                                    tracing::warn!(run, note, "this worker will not serve the run");
                                 }
+                                Some(note) if note.starts_with("fingerprint") => {}
                                 Some(note) => tracing::debug!(run, note, "short grant"),
                                 None => {}
                             }
@@ -286,10 +283,9 @@ pub async fn serve(
                         }
                         let fkeys = FleetKeys::new(&prefix, &req.run);
                         if let Some(why) = cfg.beyond_limits(&req) {
-                            if unservable.insert(run.clone()) {
+                            if share.unservable(&run, &why) {
                                 tracing::warn!(run, %why, "this worker will not serve the run");
                             }
-                            share.unservable(&run, &why);
                             share.done(&run, None);
                             summary.refused += 1;
                             put_message(&session, &fkeys.failures(), &give_back(&req, &id, why, true)).await;

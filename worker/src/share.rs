@@ -282,10 +282,15 @@ impl Share {
     }
 
     /// This worker will not serve `run`: its trials are beyond a limit, or
-    /// the run is pinned to another worker fingerprint.
-    pub fn unservable(&mut self, run: &str, why: &str) {
-        if let Some(r) = self.runs.get_mut(run) {
-            r.unservable = Some(why.to_string());
+    /// the run is pinned to another worker fingerprint. Whether this marked
+    /// it (the run is known and was not marked yet).
+    pub fn unservable(&mut self, run: &str, why: &str) -> bool {
+        match self.runs.get_mut(run) {
+            Some(r) if r.unservable.is_none() => {
+                r.unservable = Some(why.to_string());
+                true
+            }
+            _ => false,
         }
     }
 

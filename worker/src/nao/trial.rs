@@ -576,7 +576,6 @@ mod probe {
     #[test]
     #[ignore = "diagnostic for #3: prints the worst joint-limit excess over a grid of L"]
     fn worst_limit_excess_over_l() {
-        let model = NaoModel::with_params(0, &ParamValues::default()).unwrap();
         let sets: Vec<Vec<(String, f64)>> = {
             let mut v = Vec::new();
             for step in [0.08, 0.10, 0.12, 0.15] {
@@ -595,10 +594,6 @@ mod probe {
         let mut worst: Vec<(f64, String)> = Vec::new();
         for named in &sets {
             let p = &ParamValues::from_named(named).unwrap();
-            let m = NaoModel::with_params(0, p).unwrap();
-            let mut excess = vec![0.0f64; m.joints.len()];
-            let mut when = vec![0.0f64; m.joints.len()];
-            let mut c = 0;
             let mut settings = SimSettings::default();
             if let Ok(v) = std::env::var("PROBE_PGS") {
                 settings.pgs_iterations = v.parse().unwrap();
@@ -612,29 +607,20 @@ mod probe {
             if let Ok(v) = std::env::var("PROBE_ARMATURE") {
                 settings.armature_kg_m2 = v.parse().unwrap();
             }
-            let tr = run_observed(0, p, 1, 10.0, settings, OPEN, &mut |sim, _| {
-                c += 1;
-                for (k, (j, a)) in m.joints.iter().zip(&sim.joint_angles()).enumerate() {
-                    let e = (j.limits_rad.0 - a).max(a - j.limits_rad.1).max(0.0);
-                    if e > excess[k] {
-                        excess[k] = e;
-                        when[k] = f64::from(c) * 0.02;
-                    }
-                }
-            })
-            .unwrap();
-            let (k, e) =
-                excess.iter().enumerate().fold(
-                    (0, 0.0),
-                    |acc, (k, e)| if *e > acc.1 { (k, *e) } else { acc },
-                );
-            worst.push((
-                e.to_degrees(),
-                format!(
-                    "{} at {:.2}s fell {:?} {:?}",
-                    model.joints[k].name, when[k], tr.measurement.fall_time_s, named
-                ),
-            ));
+            let tr = run(0, p, 1, 10.0, settings, OPEN).unwrap();
+            let fell = tr.measurement.fall_time_s;
+            worst.push(
+                match tr.stop_excess.iter().max_by(|a, b| a.rad.total_cmp(&b.rad)) {
+                    Some(e) => (
+                        e.rad.to_degrees(),
+                        format!("{} at {:.2}s fell {fell:?} {named:?}", e.joint, e.time_s),
+                    ),
+                    None => (
+                        0.0,
+                        format!("no joint past a stop, fell {fell:?} {named:?}"),
+                    ),
+                },
+            );
         }
         worst.sort_by(|a, b| b.0.total_cmp(&a.0));
         for w in worst.iter().take(12) {
