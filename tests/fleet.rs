@@ -734,7 +734,7 @@ fn a_run_takes_one_worker_fingerprint_and_a_resume_without_it_ends() {
     let f = finished(&out);
     let reasons = &f["refused_reasons"];
     // Refused once, the faulty worker never asks that run again (it used to
-    // at once, about 2,000 times a second); the old build's asks brought no
+    // at once, about 1,700 times a second); the old build's asks brought no
     // adverts.
     assert_eq!(
         reasons["work request of another worker fingerprint"].as_u64(),
