@@ -34,6 +34,32 @@ fn check_prints_the_five_parameters_with_the_papers_bounds() {
     }
 }
 
+/// The converged experiments say their physics and the engine constant they fix.
+#[test]
+fn check_prints_the_physics_and_fixed_engine_constants_of_the_converged_experiments() {
+    for f in [
+        "physical-converged.toml",
+        "physical-technical-converged.toml",
+    ] {
+        let out = naofarm()
+            .arg("check")
+            .arg(root().join("experiments").join(f))
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(out.status.success(), "{f}: {text}");
+        assert!(
+            text.contains("physics: 10 x 2.000 ms steps per 20 ms cycle"),
+            "{f}: {text}"
+        );
+        let line = text
+            .lines()
+            .find(|l| l.contains("double_support"))
+            .unwrap_or_else(|| panic!("{f}: {text}"));
+        assert!(line.trim_end().ends_with(" 0"), "{f}: {line}");
+    }
+}
+
 #[test]
 fn check_json_is_machine_readable() {
     let out = naofarm()

@@ -396,6 +396,22 @@ impl Experiment {
                     ));
                 }
             }
+            let engine_constant = params::find(&p.name).is_some_and(|k| {
+                matches!(
+                    k.param,
+                    params::Param::StepPeriod | params::Param::DoubleSupport
+                )
+            });
+            if engine_constant && p.expert.is_none() && self.walk == WalkEngine::OpenLoop {
+                return Err(invalid(
+                    f("expert"),
+                    format!(
+                        "`{}` needs an expert value with walk = \"open-loop\": the registry's \
+                         default is the closed-loop engine's",
+                        p.name
+                    ),
+                ));
+            }
             match p.kind {
                 ParamKind::Gamma if p.lower <= 0.0 => {
                     return Err(invalid(f("lower"), "a gamma parameter needs lower > 0"))
@@ -645,10 +661,49 @@ expert = -0.04
 
     #[test]
     fn shipped_experiments_parse() {
-        for f in ["physical.toml", "physical-technical.toml"] {
+        for f in [
+            "physical.toml",
+            "physical-technical.toml",
+            "physical-converged.toml",
+            "physical-technical-converged.toml",
+        ] {
             let path = format!("{}/../experiments/{f}", env!("CARGO_MANIFEST_DIR"));
             let text = std::fs::read_to_string(&path).unwrap();
-            Experiment::from_toml(&text).unwrap_or_else(|e| panic!("{f}: {e}"));
+            let e = Experiment::from_toml(&text).unwrap_or_else(|e| panic!("{f}: {e}"));
+            if f.ends_with("converged.toml") {
+                assert_eq!(e.physics.substeps, 10, "{f}");
+                assert_eq!(e.fixed.get("double_support"), Some(&0.0), "{f}");
+            }
         }
+    }
+
+    /// The walk engine's constants are parameters too (fixed or optimised);
+    /// their registry defaults are the closed-loop engine's, so an open-loop
+    /// experiment that optimises one must say where it starts.
+    #[test]
+    fn the_walk_engines_constants_are_parameters() {
+        let period = GOOD.replace("ThighRelHip2_Z", "step_period").replace(
+            "lower = -0.08\nupper = -0.03\nexpert = -0.04",
+            "lower = 0.15\nupper = 0.26\nexpert = 0.18",
+        );
+        let e = Experiment::from_toml(&format!("walk = \"closed-loop\"\n{period}")).unwrap();
+        assert_eq!(e.expert_values(), vec![0.18]);
+        let no_expert = period.replace("expert = 0.18\n", "");
+        let e = Experiment::from_toml(&format!("walk = \"closed-loop\"\n{no_expert}")).unwrap();
+        assert_eq!(e.expert_values(), vec![0.18]);
+        let msg = err(&format!("walk = \"open-loop\"\n{no_expert}"));
+        assert!(
+            msg.contains("parameter[0].expert") && msg.contains("step_period"),
+            "{msg}"
+        );
+        Experiment::from_toml(&format!("walk = \"open-loop\"\n{period}")).unwrap();
+        let fixed = format!("{GOOD}\n[fixed]\ndouble_support = 0.6\n");
+        assert!(
+            err(&fixed).contains("fixed.double_support"),
+            "{}",
+            err(&fixed)
+        );
+        let fixed = format!("{GOOD}\n[fixed]\nstep_period = nan\n");
+        assert!(err(&fixed).contains("fixed.step_period"), "{}", err(&fixed));
     }
 }

@@ -40,6 +40,10 @@ pub enum Param {
     AnkleRelShankZ,
     /// `ElbowRelUpperArm_Y`.
     ElbowRelUpperArmY,
+    /// `step_period`.
+    StepPeriod,
+    /// `double_support`.
+    DoubleSupport,
 }
 
 impl Param {
@@ -168,6 +172,29 @@ pub const KNOWN: &[KnownParam] = &[
         unit: "m",
         default: 0.07,
         doc: "elbow forward of the upper-arm centre",
+    },
+    // The walk engine's own plan constants, as parameters: given, they
+    // replace the engine's value (docs/walk.md); not given, each engine keeps
+    // its own, so the defaults here are the closed-loop engine's.
+    KnownParam {
+        param: Param::StepPeriod,
+        name: "step_period",
+        role: Role::Walk,
+        min: 0.10,
+        max: 0.60,
+        unit: "s",
+        default: 0.18,
+        doc: "step period; not given, the engine's own (closed loop 0.18 s, open loop 0.40 s)",
+    },
+    KnownParam {
+        param: Param::DoubleSupport,
+        name: "double_support",
+        role: Role::Walk,
+        min: 0.0,
+        max: 0.5,
+        unit: "1",
+        default: 0.05,
+        doc: "double-support share of a step; not given, the engine's own (closed loop 0.05, open loop 0.10)",
     },
 ];
 

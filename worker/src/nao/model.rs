@@ -183,7 +183,12 @@ impl Morphology {
             Param::Hip1RelTorsoZ => Some(&mut self.hip1_rel_torso_z),
             Param::AnkleRelShankZ => Some(&mut self.ankle_rel_shank_z),
             Param::ElbowRelUpperArmY => Some(&mut self.elbow_rel_upper_arm_y),
-            Param::RatioFlexion | Param::LongOffset | Param::HeightLift | Param::StepLength => None,
+            Param::RatioFlexion
+            | Param::LongOffset
+            | Param::HeightLift
+            | Param::StepLength
+            | Param::StepPeriod
+            | Param::DoubleSupport => None,
         }
     }
 

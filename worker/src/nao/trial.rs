@@ -223,7 +223,7 @@ pub fn run_observed(
 ) -> Result<NaoTrial, NaoTrialError> {
     let model = NaoModel::with_params(robot_type, params)?;
     let walk: WalkParams = params.walk();
-    let gait = Gait::with_config(&model, walk, duration_s, engine.gait);
+    let gait = Gait::with_config(&model, walk, duration_s, engine.gait.with_params(params));
     let mut balance = engine.feedback.map(Balance::new);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let rest = standing_angles(&model);

@@ -38,6 +38,7 @@
 use nalgebra::{Unit, UnitQuaternion, Vector3};
 
 use super::model::NaoModel;
+use protocol::params::{Param, ParamValues};
 
 /// Step period, s.
 pub const STEP_PERIOD_S: f64 = 0.40;
@@ -134,6 +135,20 @@ impl GaitConfig {
         lift_peak: 0.5,
         lift_end: 1.0,
     };
+
+    /// These constants with the parameter set's `step_period` and
+    /// `double_support`, where it gives them (the registry's walk-engine
+    /// parameters; an experiment may fix or optimise them).
+    #[must_use]
+    pub fn with_params(self, params: &ParamValues) -> Self {
+        Self {
+            period_s: params.given(Param::StepPeriod).unwrap_or(self.period_s),
+            double_support: params
+                .given(Param::DoubleSupport)
+                .unwrap_or(self.double_support),
+            ..self
+        }
+    }
 }
 
 pub use protocol::params::WalkParams;
@@ -309,7 +324,11 @@ impl Gait {
         } else {
             [step(k - 1), -sgn * self.foot_y]
         };
-        let a = (u / self.cfg.double_support).min(1.0);
+        let a = if self.cfg.double_support > 0.0 {
+            (u / self.cfg.double_support).min(1.0)
+        } else {
+            1.0
+        };
         [
             prev[0] + (cur[0] - prev[0]) * a,
             prev[1] + (cur[1] - prev[1]) * a,
@@ -553,6 +572,37 @@ mod tests {
                 "{peak}: {top} at {at}"
             );
         }
+    }
+
+    /// `step_period` and `double_support`, where a set gives them, replace
+    /// the engine's own constants and nothing else; not given, the engine
+    /// keeps its own.
+    #[test]
+    fn the_walk_engine_parameters_replace_the_engines_constants() {
+        let none = ParamValues::default();
+        assert_eq!(
+            GaitConfig::OPEN_LOOP.with_params(&none),
+            GaitConfig::OPEN_LOOP
+        );
+        let mut p = ParamValues::default();
+        p.set(Param::StepPeriod, 0.22).unwrap();
+        p.set(Param::DoubleSupport, 0.0).unwrap();
+        let cfg = GaitConfig::OPEN_LOOP.with_params(&p);
+        assert_eq!(
+            cfg,
+            GaitConfig {
+                period_s: 0.22,
+                double_support: 0.0,
+                ..GaitConfig::OPEN_LOOP
+            }
+        );
+        // No double support: the support hands over at once, each step.
+        let model = NaoModel::new(Morphology::of_type(0).unwrap()).unwrap();
+        let g = Gait::with_config(&model, WalkParams::EXPERT, 3.0, cfg);
+        let at = |t: f64| g.zmp(t);
+        let k = START_S + 3.0 * 0.22;
+        assert!(at(k).iter().all(|v| v.is_finite()));
+        assert_eq!(at(k + 1e-9), at(k + 0.1));
     }
 
     #[test]
