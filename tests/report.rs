@@ -23,11 +23,12 @@ fn synthetic_run(dir: &Path) -> serde_json::Value {
 }
 
 /// A 2-iteration run of experiment 2 (the NAO, closed-loop walk) in `dir/run`.
-fn nao_run(dir: &Path) {
+/// Two iterations of an experiment file of `experiments/`.
+fn nao_run(dir: &Path, file: &str) {
     succeed(
         naofarm()
             .args(["run", "--json", "--workers", "2", "--iterations", "2"])
-            .arg(root().join("experiments/physical-technical.toml"))
+            .arg(root().join("experiments").join(file))
             .arg("--out")
             .arg(dir.join("run")),
     );
@@ -250,7 +251,7 @@ fn the_report_page_loads_in_a_real_browser_with_every_image() {
         return;
     };
     let dir = scratch("report-browser");
-    nao_run(&dir);
+    nao_run(&dir, "physical-technical.toml");
     let out = report(&dir);
     let page = format!("file://{}", out.join("index.html").display());
     let headless = |extra: &[&str]| {
@@ -313,11 +314,27 @@ fn png_stats(path: &Path) -> (u32, u32, usize) {
 #[test]
 fn a_nao_report_has_an_animated_replay_of_expert_optim1_and_optim2() {
     let dir = scratch("report-nao");
-    nao_run(&dir);
+    // Experiment 2 on its converged physics (10 × 2 ms, no double support:
+    // the file's `[physics]` and `[fixed]`), so that the set-up must travel.
+    nao_run(&dir, "physical-technical-converged.toml");
     let out = report(&dir);
     let page = std::fs::read_to_string(out.join("index.html")).unwrap();
     let table: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("table4.json")).unwrap()).unwrap();
+    // The run's set-up is on the page and in both tables.
+    assert!(
+        page.contains("physics 10 x 2.000 ms steps per 20 ms cycle")
+            && page.contains("fixed: double_support = 0"),
+        "the set-up on the page"
+    );
+    assert_eq!(table["physics"]["substeps"], 10);
+    assert_eq!(table["fixed"]["double_support"], 0.0);
+    let md = std::fs::read_to_string(out.join("table4.md")).unwrap();
+    assert!(md.contains("physics 10 x 2.000 ms"), "{md}");
+    assert!(
+        md.contains("| double_support (fixed) | 0.0000 | 0.0000 | 0.0000 |"),
+        "{md}"
+    );
     for (k, name) in [
         "replay-expert.svg",
         "replay-optim1.svg",
@@ -367,8 +384,24 @@ fn a_nao_report_has_an_animated_replay_of_expert_optim1_and_optim2() {
             "closed-loop",
             "--json",
         ]);
-        for (p, v) in column["params"].as_object().unwrap() {
+        // Table IV's JSON says everything the trial needs: the column's
+        // parameters, the run's fixed values and its physics.
+        for (p, v) in column["params"]
+            .as_object()
+            .unwrap()
+            .iter()
+            .chain(table["fixed"].as_object().unwrap())
+        {
             trial.arg("--param").arg(format!("{p}={v}"));
+        }
+        let physics = &table["physics"];
+        for (flag, key) in [
+            ("--substeps", "substeps"),
+            ("--solver-iterations", "solver_iterations"),
+            ("--pgs-iterations", "pgs_iterations"),
+            ("--armature", "armature_kg_m2"),
+        ] {
+            trial.arg(flag).arg(physics[key].to_string());
         }
         let t: serde_json::Value = serde_json::from_slice(&succeed(&mut trial).stdout).unwrap();
         let sim_s = t["trials"][0]["sim_time_s"].as_f64().unwrap();

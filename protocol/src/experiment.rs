@@ -238,6 +238,21 @@ pub struct Physics {
     pub armature_kg_m2: f64,
 }
 
+impl std::fmt::Display for Physics {
+    /// `10 x 2.000 ms steps per 20 ms cycle, 1 solver x 12 PGS iterations, armature 0 kg m^2`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} x {:.3} ms steps per 20 ms cycle, {} solver x {} PGS iterations, armature {} kg m^2",
+            self.substeps,
+            20.0 / f64::from(self.substeps.max(1)),
+            self.solver_iterations,
+            self.pgs_iterations,
+            self.armature_kg_m2
+        )
+    }
+}
+
 impl Default for Physics {
     fn default() -> Self {
         Self {

@@ -50,15 +50,7 @@ pub fn check(path: &Path, json: bool) -> Result<(), Failure> {
         }
     }
     if e.model == protocol::experiment::TrialModel::Nao {
-        let ph = &e.physics;
-        outln!(
-            "  physics: {} x {:.3} ms steps per 20 ms cycle, {} solver x {} PGS iterations, armature {} kg m^2",
-            ph.substeps,
-            20.0 / f64::from(ph.substeps),
-            ph.solver_iterations,
-            ph.pgs_iterations,
-            ph.armature_kg_m2
-        );
+        outln!("  physics: {}", e.physics);
     }
     let k = &e.pickout;
     outln!(

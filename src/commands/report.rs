@@ -468,8 +468,14 @@ fn table_text(exp: &Experiment, rows: &[Row], trials: u32) -> (String, String) {
         (Some(a), Some(b)) if b > 0.0 => Some(a / b),
         _ => None,
     };
+    let nao = exp.model == TrialModel::Nao;
+    let physics = if nao {
+        format!(", physics {}", exp.physics)
+    } else {
+        String::new()
+    };
     let mut md = format!(
-        "Table IV of {} ({} trials each, seeds {}–{}, walk {})\n\n| | {} |\n|---|{}\n",
+        "Table IV of {} ({} trials each, seeds {}–{}, walk {}{physics})\n\n| | {} |\n|---|{}\n",
         exp.name,
         trials,
         TABLE_SEED,
@@ -484,6 +490,9 @@ fn table_text(exp: &Experiment, rows: &[Row], trials: u32) -> (String, String) {
     };
     for (i, p) in exp.parameter.iter().enumerate() {
         line(&p.name, &|r| format!("{:.4}", r.params[i]));
+    }
+    for (name, v) in &exp.fixed {
+        line(&format!("{name} (fixed)"), &|_| format!("{v:.4}"));
     }
     line("s", &|r| format!("{:.2}", r.stats.s));
     line("mx (m)", &|r| cell(r.stats.mx));
@@ -520,9 +529,31 @@ fn table_text(exp: &Experiment, rows: &[Row], trials: u32) -> (String, String) {
         "seed0": TABLE_SEED,
         "trials": trials,
         "walk": exp.walk.name(),
+        "physics": nao.then_some(exp.physics),
+        "fixed": exp.fixed,
         "columns": json,
     });
     (md, format!("{json:#}\n"))
+}
+
+/// The run's physics (NAO runs) and fixed values, as a paragraph, or nothing.
+fn setup_html(exp: &Experiment) -> String {
+    let mut parts = Vec::new();
+    if exp.model == TrialModel::Nao {
+        parts.push(format!("physics {}", exp.physics));
+    }
+    if !exp.fixed.is_empty() {
+        let fixed: Vec<String> = exp
+            .fixed
+            .iter()
+            .map(|(k, v)| format!("{k} = {v}"))
+            .collect();
+        parts.push(format!("fixed: {}", fixed.join(", ")));
+    }
+    if parts.is_empty() {
+        return String::new();
+    }
+    format!("<p class=\"setup\">{}.</p>\n", escape(&parts.join("; ")))
 }
 
 fn escape(s: &str) -> String {
@@ -607,7 +638,7 @@ fn index_html(
          figure{{display:inline-block;margin:4px;vertical-align:top}}img{{width:720px;height:360px}}img.replay{{width:auto;height:auto;max-width:1400px}}</style>\
          </head><body>\n<h1>{name}</h1>\n<p>run id {id}, seed {seed}, robot type {ty}, walk {walk}, \
          model {model:?}; {n} of {planned} iterations decided × {tpi} trials of {dur} s: \
-         {a} ACCEPT, {q} EQUIVALENT, {r} REJECT.</p>\n<p class=\"wall\">{wall}</p>\n",
+         {a} ACCEPT, {q} EQUIVALENT, {r} REJECT.</p>\n{setup}<p class=\"wall\">{wall}</p>\n",
         name = escape(&exp.name),
         id = escape(view.id.as_deref().unwrap_or("–")),
         seed = exp.seed,
@@ -622,6 +653,7 @@ fn index_html(
         q = c(Decision::Equivalent),
         r = c(Decision::Reject),
         wall = escape(&wall_text(view)),
+        setup = setup_html(exp),
     );
     let _ = write!(
         h,
@@ -641,6 +673,9 @@ fn index_html(
     };
     for (i, p) in exp.parameter.iter().enumerate() {
         line(&p.name, &|r| format!("{:.4}", r.params[i]));
+    }
+    for (name, v) in &exp.fixed {
+        line(&format!("{name} (fixed)"), &|_| format!("{v:.4}"));
     }
     line("s", &|r| format!("{:.2}", r.stats.s));
     line("mx (m)", &|r| cell(r.stats.mx));

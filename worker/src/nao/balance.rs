@@ -187,30 +187,35 @@ mod tests {
     /// planned steps within 10 % (no sliding or lunging passed off as walking).
     #[test]
     fn the_expert_set_walks_at_the_leagues_pace_as_far_as_planned() {
-        let ts = run_many(
-            0,
-            &ParamValues::default(),
-            Batch {
-                seed0: 777,
-                n: 100,
-                threads: 2,
-            },
-            10.0,
-            SimSettings::default(),
-            closed(),
-        )
-        .unwrap();
+        walks_at_pace_as_planned(&ParamValues::default(), 100, SimSettings::default());
+    }
+
+    /// `n` trials of `params` from seed 777 with `physics`, held to the pace
+    /// issue's walk: s ≥ 0.7, mx ≥ 4.0 m, my/mx ≤ 0.25, and mx within 10 %
+    /// of the plan's hip travel. Returns the trials, s, mx and the plan's.
+    fn walks_at_pace_as_planned(
+        params: &ParamValues,
+        n: u64,
+        physics: SimSettings,
+    ) -> (Vec<NaoTrial>, f64, f64, f64) {
+        let batch = Batch {
+            seed0: 777,
+            n,
+            threads: 2,
+        };
+        let ts = run_many(0, params, batch, 10.0, physics, closed()).unwrap();
         let (s, mx, my) = summary(&ts);
         assert!(s >= 0.7, "s = {s}");
         assert!(mx >= 4.0, "mx = {mx}");
         assert!(my / mx <= 0.25, "my/mx = {}", my / mx);
-        let model = NaoModel::with_params(0, &ParamValues::default()).unwrap();
-        let gait = Gait::with_config(&model, ParamValues::default().walk(), 10.0, GAIT);
+        let model = NaoModel::with_params(0, params).unwrap();
+        let gait = Gait::with_config(&model, params.walk(), 10.0, GAIT.with_params(params));
         let planned = gait.state(10.0).hip[0] - gait.state(0.0).hip[0];
         assert!(
             (mx - planned).abs() <= 0.1 * planned,
             "walked {mx} m, planned {planned} m"
         );
+        (ts, s, mx, planned)
     }
 
     /// The feedback is what keeps the fast walk going: without it the expert
@@ -387,30 +392,7 @@ mod tests {
         ));
         let physics = SimSettings::with_physics(&exp.physics);
         let expert = ParamValues::from_named(&exp.full_params(&exp.expert_values())).unwrap();
-        let ts = run_many(
-            0,
-            &expert,
-            Batch {
-                seed0: 777,
-                n: 30,
-                threads: 2,
-            },
-            10.0,
-            physics,
-            closed(),
-        )
-        .unwrap();
-        let (s, mx, my) = summary(&ts);
-        assert!(s >= 0.7, "s = {s}");
-        assert!(mx >= 4.0, "mx = {mx}");
-        assert!(my / mx <= 0.25, "my/mx = {}", my / mx);
-        let model = NaoModel::with_params(0, &expert).unwrap();
-        let gait = Gait::with_config(&model, expert.walk(), 10.0, GAIT.with_params(&expert));
-        let planned = gait.state(10.0).hip[0] - gait.state(0.0).hip[0];
-        assert!(
-            (mx - planned).abs() <= 0.1 * planned,
-            "walked {mx} m, planned {planned} m"
-        );
+        let (ts, s, mx, planned) = walks_at_pace_as_planned(&expert, 30, physics);
         for t in &ts {
             for e in &t.stop_excess {
                 assert!(e.rad.to_degrees() <= 1.0, "expert, seed {}: {e:?}", t.seed);
