@@ -413,12 +413,18 @@ pub struct TrialArgs {
     /// Seed of the first trial (then +1 per trial).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// League robot type 0–4.
-    #[arg(long = "type", default_value_t = 0)]
-    pub robot_type: u8,
-    /// Walk engine: `open-loop` or `closed-loop`.
-    #[arg(long, default_value = "open-loop")]
-    pub walk: String,
+    /// League robot type 0–4 (default 0, or the experiment's).
+    #[arg(long = "type")]
+    pub robot_type: Option<u8>,
+    /// Walk engine: `open-loop` or `closed-loop` (default `open-loop`, or the
+    /// experiment's).
+    #[arg(long)]
+    pub walk: Option<String>,
+    /// Start from an experiment file: its walk, robot type, trial duration,
+    /// physics, and its expert set with its fixed values. Every other flag
+    /// overrides it (`--param` one value).
+    #[arg(long, value_name = "FILE", conflicts_with = "run_dir")]
+    pub experiment: Option<std::path::PathBuf>,
     /// Set one of the walk engine's constants (KEY=VALUE, repeatable): to
     /// measure them (docs/walk.md); farm trials always use the engine's own.
     #[arg(long, value_name = "KEY=VALUE", hide = true)]
@@ -430,13 +436,14 @@ pub struct TrialArgs {
     /// limit stops a walk (docs/walk.md); farm trials always use the league's.
     #[arg(long, value_name = "KEY=VALUE", hide = true)]
     pub limit: Vec<String>,
-    /// Trial duration, simulated seconds.
-    #[arg(long, default_value_t = 10.0)]
-    pub duration: f64,
+    /// Trial duration, simulated seconds (default 10, or the experiment's).
+    #[arg(long)]
+    pub duration: Option<f64>,
     /// Threads (default: cores).
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Physics sub-steps per 20 ms cycle, 1–50 (default 2; see `bench sim`).
+    /// Physics sub-steps per 20 ms cycle, 1–50 (default 2, or the
+    /// experiment's; see `bench sim`).
     #[arg(long)]
     pub substeps: Option<u32>,
     /// Rapier solver iterations per sub-step, 1–16 (default 1).

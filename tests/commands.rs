@@ -4,7 +4,7 @@
 
 mod util;
 
-use util::{events, naofarm, root, scratch, succeed};
+use util::{events, fails, naofarm, root, scratch, succeed};
 
 #[test]
 fn check_prints_the_five_parameters_with_the_papers_bounds() {
@@ -58,6 +58,50 @@ fn check_prints_the_physics_and_fixed_engine_constants_of_the_converged_experime
             .unwrap_or_else(|| panic!("{f}: {text}"));
         assert!(line.trim_end().ends_with(" 0"), "{f}: {line}");
     }
+}
+
+/// `trial --experiment FILE` runs the file's walk, physics, trial duration
+/// and expert set with its fixed values: the same trials, bit for bit, as
+/// those flags spelled out; `--param` overrides one value; a synthetic
+/// experiment is refused (exit 2).
+#[test]
+fn a_trial_from_an_experiment_file_is_the_trial_its_flags_spell_out() {
+    let json = |args: &[&str]| -> serde_json::Value {
+        let out = succeed(
+            naofarm()
+                .args(["trial", "--trials", "2", "--seed", "777", "--json"])
+                .args(args),
+        );
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let file = root().join("experiments/physical-technical-converged.toml");
+    let file = file.to_str().unwrap();
+    let from_file = json(&["--experiment", file]);
+    let spelled = json(&[
+        "--walk",
+        "closed-loop",
+        "--substeps",
+        "10",
+        "--param",
+        "double_support=0",
+    ]);
+    assert_eq!(from_file["walk"], "closed-loop");
+    assert_eq!(from_file["physics"]["substeps"], 10);
+    assert_eq!(from_file["params"]["double_support"], 0.0);
+    assert_eq!(from_file["params"]["xlength_step_max"], 0.08);
+    for k in ["mx", "my", "ex", "ey", "s"] {
+        assert_eq!(from_file[k], spelled[k], "{k}");
+    }
+    let other = json(&["--experiment", file, "--param", "double_support=0.05"]);
+    assert_eq!(other["params"]["double_support"], 0.05);
+    assert_ne!(other["mx"], from_file["mx"]);
+    let err = fails(
+        naofarm()
+            .args(["trial", "--experiment"])
+            .arg(root().join("experiments/synthetic.toml")),
+        2,
+    );
+    assert!(err.contains("synthetic"), "{err}");
 }
 
 #[test]

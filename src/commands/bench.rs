@@ -368,11 +368,12 @@ fn measure_walk(
     settings: SimSettings,
     seconds: f64,
     walk: protocol::WalkEngine,
+    params: &ParamValues,
 ) -> Result<Row, Failure> {
     let t0 = Instant::now();
     let t = trial::run_observed(
         0,
-        &ParamValues::default(),
+        params,
         1,
         seconds,
         settings,
@@ -392,6 +393,10 @@ fn measure_walk(
         fell: t.measurement.fell,
     })
 }
+
+/// `experiments/physical-technical-converged.toml`, whose physics and fixed
+/// values `bench sim` measures beside the default.
+const CONVERGED: &str = include_str!("../../experiments/physical-technical-converged.toml");
 
 /// `naofarm bench sim`: real-time factor and physics steps per second on one core.
 pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
@@ -464,18 +469,34 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             },
         ),
     ];
+    let expert = ParamValues::default();
     let mut rows = Vec::new();
     for (label, s) in variants {
         for motion in ["stand", "walk", "walk-cl"] {
             let mut r = match motion {
                 "stand" => measure_stand(s, a.seconds)?,
-                "walk" => measure_walk(s, a.seconds, protocol::WalkEngine::OpenLoop)?,
-                _ => measure_walk(s, a.seconds, protocol::WalkEngine::ClosedLoop)?,
+                "walk" => measure_walk(s, a.seconds, protocol::WalkEngine::OpenLoop, &expert)?,
+                _ => measure_walk(s, a.seconds, protocol::WalkEngine::ClosedLoop, &expert)?,
             };
             r.label = label.to_string();
             rows.push(r);
         }
     }
+    // The converged experiments' walk, as their file sets it: its physics
+    // and its fixed values (no double support) with the expert set.
+    let file = protocol::Experiment::from_toml(CONVERGED)
+        .map_err(|e| Failure::Job(anyhow!("the converged experiment file: {e}")))?;
+    let converged_params = ParamValues::from_named(&file.full_params(&file.expert_values()))
+        .map_err(|e| Failure::Job(anyhow!("the converged experiment file: {e}")))?;
+    let mut r = measure_walk(
+        SimSettings::with_physics(&file.physics),
+        a.seconds,
+        file.walk,
+        &converged_params,
+    )?;
+    r.label = "converged experiments: 10x2ms, no double support".into();
+    rows.push(r);
+    let converged = rows.len() - 1;
     let rtf = |r: &Row| r.sim_s / r.wall_s;
     let sps = |r: &Row| r.sim_s / CYCLE_S * f64::from(r.settings.substeps) / r.wall_s;
     let headline = rows
@@ -489,6 +510,8 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
     // The closed-loop walk's speed as a share of the open loop's, measured in
     // the same run at the default settings.
     let closed_share = rtf(closed) / rtf(headline);
+    let converged = &rows[converged];
+    let converged_share = rtf(converged) / rtf(headline);
     if a.json {
         let v = serde_json::json!({
             "realtime_factor": rtf(headline),
@@ -496,6 +519,8 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             "motion": "expert walk, type 0, default settings, one core",
             "closed_loop_realtime_factor": rtf(closed),
             "closed_loop_share_of_open_loop": closed_share,
+            "converged_realtime_factor": rtf(converged),
+            "converged_share_of_open_loop": converged_share,
             "rows": rows.iter().map(|r| serde_json::json!({
                 "settings": r.label,
                 "motion": r.motion,
@@ -532,6 +557,11 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             "closed-loop walk at the default settings: {:.1}x real time, {:.0} % of the open loop's",
             rtf(closed),
             100.0 * closed_share
+        );
+        outln!(
+            "closed-loop walk of the converged experiments: {:.1}x real time, {:.0} % of the open loop's at the default",
+            rtf(converged),
+            100.0 * converged_share
         );
     }
     Ok(())

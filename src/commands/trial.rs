@@ -4,7 +4,9 @@
 use std::time::Instant;
 
 use anyhow::anyhow;
-use protocol::{measurement::Measurement, params::ParamValues, pickout::stats, WalkEngine};
+use protocol::{
+    measurement::Measurement, params::ParamValues, pickout::stats, TrialModel, WalkEngine,
+};
 use worker::nao::{
     model::NaoModel,
     replay::Replayed,
@@ -14,7 +16,7 @@ use worker::nao::{
 
 use crate::{
     args::TrialArgs,
-    common::{parse_params, Failure},
+    common::{load_experiment, parse_params, Failure},
 };
 
 /// `naofarm trial`: n trials of one parameter set, the Table IV row.
@@ -31,20 +33,48 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     if a.trials == 0 || a.trials > 100_000 {
         return Err(Failure::Usage(anyhow!("--trials must be in 1..=100000")));
     }
-    if !(a.duration.is_finite() && a.duration > 0.0 && a.duration <= 600.0) {
+    let exp = a
+        .experiment
+        .as_deref()
+        .map(load_experiment)
+        .transpose()?
+        .map(|(e, _)| e);
+    if exp.as_ref().is_some_and(|e| e.model != TrialModel::Nao) {
+        return Err(Failure::Usage(anyhow!(
+            "--experiment: a trial runs the NAO, not the `synthetic` model"
+        )));
+    }
+    let duration = a
+        .duration
+        .or(exp.as_ref().map(|e| e.trial_duration_s))
+        .unwrap_or(10.0);
+    if !(duration.is_finite() && duration > 0.0 && duration <= 600.0) {
         return Err(Failure::Usage(anyhow!("--duration must be in (0, 600] s")));
     }
-    let params = parse_params(&a.params)?;
+    let robot_type = a
+        .robot_type
+        .or(exp.as_ref().map(|e| e.robot_type))
+        .unwrap_or(0);
+    // The experiment's expert set and fixed values, then each --param over them.
+    let mut params = exp
+        .as_ref()
+        .map(|e| e.full_params(&e.expert_values()))
+        .unwrap_or_default();
+    for (name, v) in parse_params(&a.params)? {
+        match params.iter_mut().find(|(n, _)| *n == name) {
+            Some(slot) => slot.1 = v,
+            None => params.push((name, v)),
+        }
+    }
     let values = ParamValues::from_named(&params).map_err(|e| Failure::Usage(e.into()))?;
-    let model =
-        NaoModel::with_params(a.robot_type, &values).map_err(|e| Failure::Usage(e.into()))?;
+    let model = NaoModel::with_params(robot_type, &values).map_err(|e| Failure::Usage(e.into()))?;
     if a.threads.is_some_and(|t| t == 0 || t > 1024) {
         return Err(Failure::Usage(anyhow!("--threads must be in 1..=1024")));
     }
     let threads = a
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from));
-    let d = protocol::Physics::default();
+    let d = exp.as_ref().map(|e| e.physics).unwrap_or_default();
     let physics = protocol::Physics {
         substeps: a.substeps.unwrap_or(d.substeps),
         solver_iterations: a.solver_iterations.unwrap_or(d.solver_iterations),
@@ -59,7 +89,11 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     for kv in &a.limit {
         move_limit(&mut settings, &model, kv)?;
     }
-    let walk = WalkEngine::parse(&a.walk).map_err(|m| Failure::Usage(anyhow!("--walk: {m}")))?;
+    let walk = match (&a.walk, &exp) {
+        (Some(w), _) => WalkEngine::parse(w).map_err(|m| Failure::Usage(anyhow!("--walk: {m}")))?,
+        (None, Some(e)) => e.walk,
+        (None, None) => WalkEngine::OpenLoop,
+    };
     let mut engine = trial::Engine::of(walk);
     for kv in &a.engine {
         let (k, v) = kv
@@ -70,9 +104,9 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             .map_err(|m| Failure::Usage(anyhow!("--engine {m}")))?;
     }
     let first = Replayed {
-        robot_type: a.robot_type,
+        robot_type,
         seed: a.seed,
-        duration_s: a.duration,
+        duration_s: duration,
         params: &params,
         values: &values,
         settings,
@@ -86,14 +120,14 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     }
     let t0 = Instant::now();
     let runs = trial::run_many(
-        a.robot_type,
+        robot_type,
         &values,
         Batch {
             seed0: a.seed,
             n: a.trials,
             threads,
         },
-        a.duration,
+        duration,
         settings,
         engine,
     )
@@ -105,7 +139,10 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     if a.json {
         let v = serde_json::json!({
             "params": params_json(&params),
-            "robot_type": a.robot_type,
+            "robot_type": robot_type,
+            "walk": engine.name(),
+            "duration_s": duration,
+            "physics": physics,
             "s": s.s,
             "mx": s.mx,
             "my": s.my,
@@ -126,7 +163,7 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         outln!(
             "     s     mx     my     ex     ey   (m; {} trials of {} s)",
             a.trials,
-            a.duration
+            duration
         );
         outln!(
             "{:6.2} {:>6} {:>6} {:>6} {:>6}",
