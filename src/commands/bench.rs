@@ -494,7 +494,7 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
         file.walk,
         &converged_params,
     )?;
-    r.label = "converged experiments: 10x2ms, no double support".into();
+    r.label = "converged files: 10x2ms, no double support".into();
     rows.push(r);
     let converged = rows.len() - 1;
     let rtf = |r: &Row| r.sim_s / r.wall_s;
