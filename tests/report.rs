@@ -206,6 +206,13 @@ fn report_writes_every_figure_and_table_iv_and_leaves_the_run_as_it_was() {
             "run {k} on the page: {page}"
         );
     }
+    // A synthetic run has no physics and fixes nothing: its set-up is empty.
+    assert!(page.contains("<th>walk</th><th>set-up</th>"), "{page}");
+    assert_eq!(
+        page.matches("<td>open-loop</td><td>–</td>").count(),
+        2,
+        "{page}"
+    );
     circles(&both.join("best.svg"));
     let page2 = std::fs::read_to_string(both.join("1-synthetic/index.html")).unwrap();
     assert!(page2.contains(" over 2 sessions "), "{page2}");

@@ -536,8 +536,8 @@ fn table_text(exp: &Experiment, rows: &[Row], trials: u32) -> (String, String) {
     (md, format!("{json:#}\n"))
 }
 
-/// The run's physics (NAO runs) and fixed values, as a paragraph, or nothing.
-fn setup_html(exp: &Experiment) -> String {
+/// The run's physics (NAO runs) and fixed values, or nothing to say.
+fn setup_text(exp: &Experiment) -> Option<String> {
     let mut parts = Vec::new();
     if exp.model == TrialModel::Nao {
         parts.push(format!("physics {}", exp.physics));
@@ -550,10 +550,14 @@ fn setup_html(exp: &Experiment) -> String {
             .collect();
         parts.push(format!("fixed: {}", fixed.join(", ")));
     }
-    if parts.is_empty() {
-        return String::new();
-    }
-    format!("<p class=\"setup\">{}.</p>\n", escape(&parts.join("; ")))
+    (!parts.is_empty()).then(|| parts.join("; "))
+}
+
+/// [`setup_text`] as a paragraph of the run's page, or nothing.
+fn setup_html(exp: &Experiment) -> String {
+    setup_text(exp).map_or_else(String::new, |t| {
+        format!("<p class=\"setup\">{}.</p>\n", escape(&t))
+    })
 }
 
 fn escape(s: &str) -> String {
@@ -793,7 +797,7 @@ fn runs_html(found: &[Found], out: &Path, trials: u32) -> String {
     let _ = writeln!(
         h,
         "<h2>Table IV rows</h2><p>{trials} trials per column from seed {TABLE_SEED}.</p>\
-         <table><tr><th>run</th><th>experiment</th><th>seed</th><th>type</th><th>walk</th>\
+         <table><tr><th>run</th><th>experiment</th><th>seed</th><th>type</th><th>walk</th><th>set-up</th>\
          <th>decided</th><th>wall time</th><th>Expert s / mx</th><th>Optim.1 s / mx</th><th>Optim.2 s / mx</th>\
          <th>Optim.1 / Expert</th><th>Optim.2 / Expert</th></tr>"
     );
@@ -818,12 +822,13 @@ fn runs_html(found: &[Found], out: &Path, trials: u32) -> String {
         );
         let _ = writeln!(
             h,
-            "<tr><td><a href=\"{link}\">{k}</a></td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>\
+            "<tr><td><a href=\"{link}\">{k}</a></td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>\
              <td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
             escape(&exp.name),
             exp.seed,
             exp.robot_type,
             exp.walk.name(),
+            escape(&setup_text(exp).unwrap_or_else(|| "–".into())),
             f.view.decided.len(),
             f.view
                 .wall
