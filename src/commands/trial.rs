@@ -48,8 +48,10 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         .duration
         .or(exp.as_ref().map(|e| e.trial_duration_s))
         .unwrap_or(10.0);
-    if !(duration.is_finite() && duration > 0.0 && duration <= 600.0) {
-        return Err(Failure::Usage(anyhow!("--duration must be in (0, 600] s")));
+    if !(duration.is_finite() && duration > 0.0 && duration <= 3600.0) {
+        return Err(Failure::Usage(anyhow!(
+            "--duration must be in (0, 3600] s, as an experiment's trial_duration_s"
+        )));
     }
     let robot_type = a
         .robot_type
