@@ -75,9 +75,8 @@ pub enum Command {
         #[arg(long, value_name = "DIR")]
         tls: Option<PathBuf>,
     },
-    /// This host's worker fingerprint (the hash of fixed probe trials, the
-    /// parameter registry and the naofarm version): workers of one
-    /// fingerprint return the same bits and accept the same parameters.
+    /// This host's worker fingerprint (the hash of fixed probe trials and the
+    /// naofarm version): workers of one fingerprint return the same bits.
     Fingerprint,
     /// Create a CA and one certificate per role (coordinator, worker, watcher, router) for --tls.
     Certs {

@@ -14,8 +14,12 @@ use crate::{
     measurement::Measurement,
 };
 
-/// Version of the envelope and message layout.
-pub const WIRE_VERSION: u8 = 4;
+/// Version of the envelope and message layout, and of what a message may
+/// carry: 5 since `step_period` and `double_support` joined the parameter
+/// registry (a grant of a run that sets them is one a version-4 decoder
+/// refuses, so a version-4 worker must not take part; it is not told apart by
+/// its fingerprint, whose probe bits are unchanged).
+pub const WIRE_VERSION: u8 = 5;
 /// Largest message accepted, in bytes (checked before any allocation).
 pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
 const MAGIC: [u8; 2] = *b"NF";

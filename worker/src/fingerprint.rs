@@ -1,9 +1,6 @@
 //! A worker's fingerprint: the hash of fixed probe trials it runs at start,
-//! of the parameter registry it accepts, and of its naofarm version. Two
-//! workers with one fingerprint return the same bits for the same trial and
-//! accept the same parameters (a build that does not know a parameter a run
-//! sends would fail its trials, and stop the run, instead of being refused);
-//! the probe catches a different build as well
+//! and of its naofarm version. Two workers with one fingerprint return the
+//! same bits for the same trial; the probe catches a different build as well
 //! as a host whose maths library (glibc picks FMA variants per CPU at run
 //! time) or architecture gives other bits. A run takes trials from workers of
 //! one fingerprint only (the coordinator journals it), so its history never
@@ -45,19 +42,8 @@ fn probes() -> Vec<TrialRequest> {
 /// Computes the fingerprint (about 0.1 s of CPU: the probes are real trials).
 #[must_use]
 pub fn compute() -> u64 {
-    compute_with(protocol::params::KNOWN)
-}
-
-/// The fingerprint of a worker that accepts the parameters of `registry`.
-fn compute_with(registry: &[protocol::params::KnownParam]) -> u64 {
     let mut h = Sha3_256::new();
     h.update(env!("CARGO_PKG_VERSION").as_bytes());
-    for k in registry {
-        h.update(k.name.as_bytes());
-        for v in [k.min, k.max, k.default] {
-            h.update(v.to_bits().to_le_bytes());
-        }
-    }
     for p in probes() {
         match crate::run_trial(&p) {
             Ok(m) => {
@@ -89,20 +75,6 @@ pub fn of_this_worker() -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// A build that knows one parameter fewer (as before `step_period` and
-    /// `double_support`), or the same names with other ranges, has another
-    /// fingerprint, so a run refuses it rather than have it fail trials.
-    #[test]
-    fn the_fingerprint_covers_the_parameter_registry() {
-        let known = protocol::params::KNOWN;
-        let all = compute_with(known);
-        assert_eq!(all, compute());
-        assert_ne!(all, compute_with(&known[..known.len() - 2]));
-        let mut wider = known.to_vec();
-        wider[0].max += 0.01;
-        assert_ne!(all, compute_with(&wider));
-    }
 
     #[test]
     fn the_fingerprint_is_a_function_of_the_probe_bits() {
