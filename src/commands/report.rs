@@ -461,6 +461,27 @@ fn cell(v: Option<f64>) -> String {
     v.map_or("–".into(), |v| format!("{v:.3}"))
 }
 
+/// Table IV's rows that say each column's set, as (label, one cell per
+/// column): the optimised parameters, then the run's fixed values.
+fn set_rows(exp: &Experiment, rows: &[Row]) -> Vec<(String, Vec<String>)> {
+    let mut out: Vec<(String, Vec<String>)> = exp
+        .parameter
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let cells = rows.iter().map(|r| format!("{:.4}", r.params[i])).collect();
+            (p.name.clone(), cells)
+        })
+        .collect();
+    out.extend(exp.fixed.iter().map(|(name, v)| {
+        (
+            format!("{name} (fixed)"),
+            vec![format!("{v:.4}"); rows.len()],
+        )
+    }));
+    out
+}
+
 /// Table IV as Markdown and as JSON.
 fn table_text(exp: &Experiment, rows: &[Row], trials: u32) -> (String, String) {
     let expert_mx = rows.first().and_then(|r| r.stats.mx);
@@ -484,16 +505,13 @@ fn table_text(exp: &Experiment, rows: &[Row], trials: u32) -> (String, String) {
         rows.iter().map(|r| r.name).collect::<Vec<_>>().join(" | "),
         "---|".repeat(rows.len())
     );
+    for (label, cells) in set_rows(exp, rows) {
+        let _ = writeln!(md, "| {label} | {} |", cells.join(" | "));
+    }
     let mut line = |label: &str, f: &dyn Fn(&Row) -> String| {
         let cells: Vec<String> = rows.iter().map(f).collect();
         let _ = writeln!(md, "| {label} | {} |", cells.join(" | "));
     };
-    for (i, p) in exp.parameter.iter().enumerate() {
-        line(&p.name, &|r| format!("{:.4}", r.params[i]));
-    }
-    for (name, v) in &exp.fixed {
-        line(&format!("{name} (fixed)"), &|_| format!("{v:.4}"));
-    }
     line("s", &|r| format!("{:.2}", r.stats.s));
     line("mx (m)", &|r| cell(r.stats.mx));
     line("my (m)", &|r| cell(r.stats.my));
@@ -668,6 +686,13 @@ fn index_html(
     }
     h += "</tr>\n";
     let expert_mx = rows.first().and_then(|r| r.stats.mx);
+    for (label, cells) in set_rows(exp, rows) {
+        let _ = write!(h, "<tr><th>{}</th>", escape(&label));
+        for c in cells {
+            let _ = write!(h, "<td>{c}</td>");
+        }
+        h += "</tr>\n";
+    }
     let mut line = |label: &str, f: &dyn Fn(&Row) -> String| {
         let _ = write!(h, "<tr><th>{}</th>", escape(label));
         for r in rows {
@@ -675,12 +700,6 @@ fn index_html(
         }
         h += "</tr>\n";
     };
-    for (i, p) in exp.parameter.iter().enumerate() {
-        line(&p.name, &|r| format!("{:.4}", r.params[i]));
-    }
-    for (name, v) in &exp.fixed {
-        line(&format!("{name} (fixed)"), &|_| format!("{v:.4}"));
-    }
     line("s", &|r| format!("{:.2}", r.stats.s));
     line("mx (m)", &|r| cell(r.stats.mx));
     line("my (m)", &|r| cell(r.stats.my));
