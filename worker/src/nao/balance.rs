@@ -49,6 +49,7 @@ pub const GAIT: GaitConfig = GaitConfig {
     ramp_steps: 0.0,
     lift_peak: 0.5,
     lift_end: 1.0,
+    yaw_pitch_rad: 0.0,
 };
 
 /// Time constant of the tilt estimate's pull towards the accelerometer, s.

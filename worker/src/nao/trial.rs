@@ -79,6 +79,7 @@ impl Engine {
             "ramp_steps" => g.ramp_steps = num()?.clamp(0.0, 100.0),
             "lift_peak" => g.lift_peak = num()?.clamp(0.05, 0.95),
             "lift_end" => g.lift_end = num()?.clamp(0.1, 1.0),
+            "yaw_pitch_rad" => g.yaw_pitch_rad = num()?.clamp(-0.5, 0.0),
             "travel" => {
                 g.travel = match value {
                     "cosine" => super::walk::TravelProfile::Cosine,

@@ -83,6 +83,10 @@ pub struct GaitConfig {
     pub lift_peak: f64,
     /// Share of the swing by which the foot is down again (1: at touchdown).
     pub lift_end: f64,
+    /// Added to both hip yaw-pitch targets (le1), rad; 0: the IK's own. A
+    /// measuring lever (`--engine yaw_pitch_rad`, ≤ 0: away from the +1°
+    /// stop the stance leg rests on); the IK does not compensate for it.
+    pub yaw_pitch_rad: f64,
 }
 
 /// How the swing foot travels forward over single support (s in 0..1, as a
@@ -134,6 +138,7 @@ impl GaitConfig {
         ramp_steps: 0.0,
         lift_peak: 0.5,
         lift_end: 1.0,
+        yaw_pitch_rad: 0.0,
     };
 
     /// These constants with the parameter set's `step_period` and
@@ -438,6 +443,9 @@ impl Gait {
             let f = st.feet[side];
             let p = [f[0] - st.hip[0], f[1] - st.hip[1] - y, f[2] - st.hip[2]];
             *o = leg_ik(p, &self.leg);
+            if self.cfg.yaw_pitch_rad != 0.0 {
+                o[0] += self.cfg.yaw_pitch_rad;
+            }
         }
         if let Some((sup, wgt)) = st.support {
             let sgn = if sup == 0 { 1.0 } else { -1.0 };
