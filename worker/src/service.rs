@@ -187,9 +187,13 @@ async fn ask(session: Session, work_key: String, req: WorkRequest) -> Result<Wor
         .map_err(|e| e.to_string())?;
     match replies.recv_async().await {
         Ok(reply) => match reply.result() {
-            Ok(sample) => {
-                WorkGrant::decode(&sample.payload().to_bytes()).map_err(|e| e.to_string())
-            }
+            Ok(sample) => WorkGrant::decode(&sample.payload().to_bytes()).map_err(|e| {
+                // Not a quiet "no grant": the run has leased trials to this
+                // worker that it cannot run, and they wait out their lease.
+                tracing::warn!(key = %sample.key_expr(), error = %e,
+                    "a grant this worker cannot read: its trials go back to the run when their lease ends");
+                e.to_string()
+            }),
             Err(e) => Err(format!(
                 "the run refused: {}",
                 String::from_utf8_lossy(&e.payload().to_bytes())
