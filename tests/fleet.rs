@@ -1104,3 +1104,40 @@ fn python_watcher_sees(ep: &str, pki: &Path, name: &str) {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// A worker that cannot read the trials of a grant (a fault hook makes each
+/// name a parameter no build knows, as a grant from a build with another
+/// parameter registry would) gives each back at once, refused with the
+/// reason, and stops asking the run; the run offers them to another worker
+/// and ends with the history it has alone. Held instead, they would wait out
+/// their 600 s lease, far past the test's deadline.
+#[test]
+fn a_worker_gives_back_at_once_the_trials_it_cannot_read() {
+    let dir = scratch("fleet-unreadable");
+    let exp = experiment(&dir, "u.toml", "unreadable", 11, 6);
+    let want = alone(&dir, &exp, "alone");
+    let (_router, ep) = router(&dir);
+    let out = dir.join("run");
+    let mut c = coordinator_with(&dir, &exp, &out, &ep, &["--lease-s", "600"]);
+    let faulty = Proc::spawn(
+        naofarm()
+            .args(["worker", "--connect", &ep, "--slots", "4"])
+            .env("NAOFARM_FAULT_GRANT", "unknown-param")
+            .env("RUST_LOG", "warn")
+            .stdout(Stdio::null()),
+        &dir,
+        "faulty-worker",
+    );
+    let why = wait_line(&faulty, "will not serve the run");
+    assert!(why.contains("no_such_parameter"), "{why}");
+    assert!(faulty
+        .stderr()
+        .contains("giving back a trial this worker cannot read"));
+    let _w = worker(&dir, &ep, 2, 0, &[]);
+    assert!(wait_exit(&mut c).success(), "{}", c.stderr());
+    assert_eq!(bits(&decided(&records(&out))), want);
+    let f = finished(&out);
+    assert!(f["redispatched"].as_u64() >= Some(1), "{f}");
+    assert_eq!(f["failures"], 0, "{f}");
+    assert!(c.stderr().contains("a worker gave a trial back"));
+}

@@ -127,6 +127,22 @@ pub trait WireMessage: Serialize + DeserializeOwned + Sized {
 
     /// Decodes and checks a message.
     fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
+        let value = Self::decode_unchecked(bytes)?;
+        value
+            .validate()
+            .map_err(|(field, problem)| DecodeError::Field {
+                message: Self::NAME,
+                field,
+                problem,
+            })?;
+        Ok(value)
+    }
+
+    /// Decodes the envelope and body without the field checks of
+    /// [`WireMessage::validate`]: only to give back what a message that
+    /// failed them holds (a worker returning the trials of a grant it cannot
+    /// run), never to act on it.
+    fn decode_unchecked(bytes: &[u8]) -> Result<Self, DecodeError> {
         let message = Self::NAME;
         if bytes.len() > MAX_MESSAGE_BYTES {
             return Err(DecodeError::TooLarge {
@@ -163,13 +179,6 @@ pub trait WireMessage: Serialize + DeserializeOwned + Sized {
                 extra: body.len() - used,
             });
         }
-        value
-            .validate()
-            .map_err(|(field, problem)| DecodeError::Field {
-                message,
-                field,
-                problem,
-            })?;
         Ok(value)
     }
 

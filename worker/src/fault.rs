@@ -2,7 +2,8 @@
 //! (never by a second build): `NAOFARM_FAULT_TRIAL=MODE[@I/K]` makes every
 //! trial (or only trial K of iteration I) misbehave, where MODE is `fail` (an
 //! error), `panic`, `nan` (a non-finite result) or `forge` (x = 10⁶ m, a
-//! result no robot walks). Without the variable,
+//! result no robot walks); `NAOFARM_FAULT_GRANT` ([`grant_bytes`]) makes
+//! every grant's trials unreadable. Without the variables,
 //! [`run_trial`] is exactly [`crate::run_trial`].
 
 use protocol::TrialRequest;
@@ -55,6 +56,27 @@ pub fn tamper(o: &mut protocol::TrialOutcome) {
         Ok("unsent") => o.trial += 1000,
         _ => {}
     }
+}
+
+/// `NAOFARM_FAULT_GRANT=unknown-param`: every trial of every grant the
+/// worker gets names a parameter no build knows, as a grant from a build
+/// with another parameter registry would.
+pub const GRANT_FAULT_VAR: &str = "NAOFARM_FAULT_GRANT";
+
+/// Applies the grant fault hook to a grant's bytes as received, if set.
+#[must_use]
+pub fn grant_bytes(bytes: Vec<u8>) -> Vec<u8> {
+    use protocol::wire::{WireMessage, WorkGrant};
+    if std::env::var(GRANT_FAULT_VAR).as_deref() != Ok("unknown-param") {
+        return bytes;
+    }
+    let Ok(mut g) = WorkGrant::decode_unchecked(&bytes) else {
+        return bytes;
+    };
+    for t in &mut g.trials {
+        t.params.push(("no_such_parameter".into(), 1.0));
+    }
+    g.encode().unwrap_or(bytes)
 }
 
 /// Runs one trial, unless a fault hook says otherwise.

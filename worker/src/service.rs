@@ -176,8 +176,46 @@ async fn run_one(
     (result, started.elapsed().as_secs_f64())
 }
 
+/// A grant as this worker reads it.
+struct Grant {
+    /// The grant, with the trials it can read.
+    grant: WorkGrant,
+    /// Trials of the grant that fail their checks (a build with another
+    /// parameter registry sent them), each with why: given back at once.
+    unreadable: Vec<(TrialRequest, String)>,
+}
+
+/// Reads a grant's bytes: a grant whose only fault is trials that fail their
+/// checks keeps the rest, and names those to give back.
+fn read_grant(bytes: &[u8]) -> Result<Grant, protocol::DecodeError> {
+    let e = match WorkGrant::decode(bytes) {
+        Ok(grant) => {
+            return Ok(Grant {
+                grant,
+                unreadable: Vec::new(),
+            })
+        }
+        Err(e @ protocol::DecodeError::Field { .. }) => e,
+        Err(e) => return Err(e),
+    };
+    let mut grant = WorkGrant::decode_unchecked(bytes)?;
+    let mut unreadable = Vec::new();
+    for t in std::mem::take(&mut grant.trials) {
+        match t.validate() {
+            Ok(()) => grant.trials.push(t),
+            Err((field, problem)) => {
+                unreadable.push((t, format!("cannot read the trial: `{field}`: {problem}")));
+            }
+        }
+    }
+    if grant.validate().is_err() {
+        return Err(e);
+    }
+    Ok(Grant { grant, unreadable })
+}
+
 /// Asks run `run` for `want` trials; the grant, or why there is none.
-async fn ask(session: Session, work_key: String, req: WorkRequest) -> Result<WorkGrant, String> {
+async fn ask(session: Session, work_key: String, req: WorkRequest) -> Result<Grant, String> {
     let bytes = req.encode().map_err(|e| e.to_string())?;
     let replies = session
         .get(work_key)
@@ -187,13 +225,17 @@ async fn ask(session: Session, work_key: String, req: WorkRequest) -> Result<Wor
         .map_err(|e| e.to_string())?;
     match replies.recv_async().await {
         Ok(reply) => match reply.result() {
-            Ok(sample) => WorkGrant::decode(&sample.payload().to_bytes()).map_err(|e| {
-                // Not a quiet "no grant": the run has leased trials to this
-                // worker that it cannot run, and they wait out their lease.
-                tracing::warn!(key = %sample.key_expr(), error = %e,
-                    "a grant this worker cannot read: its trials go back to the run when their lease ends");
-                e.to_string()
-            }),
+            Ok(sample) => {
+                let bytes = crate::fault::grant_bytes(sample.payload().to_bytes().into_owned());
+                read_grant(&bytes).map_err(|e| {
+                    // Not a quiet "no grant": the run has leased trials to
+                    // this worker that it cannot name to give back, and they
+                    // wait out their lease.
+                    tracing::warn!(key = %sample.key_expr(), error = %e,
+                        "a grant this worker cannot read: its trials go back to the run when their lease ends");
+                    e.to_string()
+                })
+            }
             Err(e) => Err(format!(
                 "the run refused: {}",
                 String::from_utf8_lossy(&e.payload().to_bytes())
@@ -205,7 +247,7 @@ async fn ask(session: Session, work_key: String, req: WorkRequest) -> Result<Wor
 
 enum Done {
     /// A grant (or its failure) for (run, asked).
-    Grant(String, u32, Result<WorkGrant, String>),
+    Grant(String, u32, Result<Grant, String>),
     /// A trial ended.
     Trial(TrialRequest, Result<crate::Measurement, String>, f64),
 }
@@ -258,8 +300,8 @@ pub async fn serve(
             Some(done) = rx.recv() => match done {
                 Done::Grant(run, asked, grant) => {
                     asking -= asked;
-                    let (trials, ready) = match grant {
-                        Ok(g) => {
+                    let (trials, unreadable, ready) = match grant {
+                        Ok(Grant { grant: g, unreadable }) => {
                             match &g.note {
                                 // The run's fingerprint is journaled and this
                                 // worker's fixed: it is never asked again.
@@ -270,15 +312,33 @@ pub async fn serve(
                                 Some(note) => tracing::debug!(run, note, "short grant"),
                                 None => {}
                             }
-                            (g.trials, Some((g.ready, g.running, g.seq)))
+                            (g.trials, unreadable, Some((g.ready, g.running, g.seq)))
                         }
                         Err(e) => {
                             tracing::debug!(run, error = %e, "no grant");
-                            (Vec::new(), None)
+                            (Vec::new(), Vec::new(), None)
                         }
                     };
-                    let got = u32::try_from(trials.len()).unwrap_or(u32::MAX);
+                    let got = u32::try_from(trials.len() + unreadable.len()).unwrap_or(u32::MAX);
                     share.granted(&run, asked, got, ready);
+                    // Trials this build cannot read (another parameter
+                    // registry): given back at once, refused with the reason,
+                    // so that the run offers them to other workers instead
+                    // of waiting out their lease; this build never can.
+                    for (req, why) in unreadable {
+                        share.done(&run, None);
+                        if req.run != run {
+                            tracing::warn!(run, other = %req.run, "a grant held another run's trial; ignored");
+                            continue;
+                        }
+                        tracing::warn!(run, iteration = req.iteration, trial = req.trial, %why, "giving back a trial this worker cannot read");
+                        if share.unservable(&run, &why) {
+                            tracing::warn!(run, %why, "this worker will not serve the run");
+                        }
+                        summary.refused += 1;
+                        let fkeys = FleetKeys::new(&prefix, &req.run);
+                        put_message(&session, &fkeys.failures(), &give_back(&req, &id, why, true)).await;
+                    }
                     for req in trials {
                         if req.run != run {
                             tracing::warn!(run, other = %req.run, "a grant held another run's trial; ignored");
@@ -387,8 +447,11 @@ pub async fn serve(
         match tokio::time::timeout_at(late, rx.recv()).await {
             Ok(Some(Done::Grant(_, asked, grant))) => {
                 asking -= asked;
-                for req in grant.map(|g| g.trials).unwrap_or_default() {
-                    held.insert((req.run.clone(), req.iteration, req.trial), req);
+                if let Ok(g) = grant {
+                    let unreadable = g.unreadable.into_iter().map(|(req, _)| req);
+                    for req in g.grant.trials.into_iter().chain(unreadable) {
+                        held.insert((req.run.clone(), req.iteration, req.trial), req);
+                    }
                 }
             }
             Ok(Some(Done::Trial(..))) => {}
@@ -405,4 +468,62 @@ pub async fn serve(
     }
     tracing::info!(worker = %id, trials = summary.trials, "worker stopped");
     Ok(summary)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::{wire::RunState, Physics, WalkEngine};
+
+    fn trial(k: u32, params: Vec<(String, f64)>) -> TrialRequest {
+        TrialRequest {
+            run: "r".into(),
+            iteration: 2,
+            trial: k,
+            seed: 7,
+            model: TrialModel::Synthetic,
+            robot_type: 0,
+            duration_s: 1.0,
+            params,
+            dispatch: 9,
+            physics: Physics::default(),
+            walk: WalkEngine::OpenLoop,
+        }
+    }
+
+    fn grant(trials: Vec<TrialRequest>, note: Option<String>) -> Vec<u8> {
+        WorkGrant {
+            trials,
+            ready: 0,
+            running: 2,
+            seq: 1,
+            state: RunState::Running,
+            note,
+        }
+        .encode()
+        .unwrap()
+    }
+
+    /// A grant whose only fault is a trial that fails its checks keeps the
+    /// others and names that one, with the field, to give back; a fault of
+    /// the grant itself leaves nothing to name.
+    #[test]
+    fn a_grant_keeps_the_trials_it_can_read_and_names_the_others() {
+        let bad = trial(1, vec![("no_such_parameter".into(), 1.0)]);
+        let g = read_grant(&grant(vec![trial(0, vec![]), bad.clone()], None)).unwrap();
+        assert_eq!(g.grant.trials, vec![trial(0, vec![])]);
+        assert_eq!(g.unreadable.len(), 1);
+        assert_eq!(g.unreadable[0].0, bad);
+        assert!(
+            g.unreadable[0].1.contains("`params`")
+                && g.unreadable[0].1.contains("no_such_parameter"),
+            "{}",
+            g.unreadable[0].1
+        );
+        let whole = read_grant(&grant(vec![trial(0, vec![])], None)).unwrap();
+        assert_eq!((whole.grant.trials.len(), whole.unreadable.len()), (1, 0));
+        let long_note = Some("n".repeat(5000));
+        assert!(read_grant(&grant(vec![bad], long_note)).is_err());
+        assert!(read_grant(b"not a grant").is_err());
+    }
 }
