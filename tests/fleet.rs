@@ -99,6 +99,19 @@ fn worker(dir: &Path, ep: &str, slots: u32, pace_ms: u64, extra: &[&str]) -> Pro
     )
 }
 
+/// A worker with `slots` and one fault hook, `var`=`value`, logging warnings.
+fn faulty_worker(dir: &Path, ep: &str, slots: u32, var: &str, value: &str) -> Proc {
+    Proc::spawn(
+        naofarm()
+            .args(["worker", "--connect", ep, "--slots", &slots.to_string()])
+            .env(var, value)
+            .env("RUST_LOG", "warn")
+            .stdout(Stdio::null()),
+        dir,
+        "faulty-worker",
+    )
+}
+
 /// Waits for `p` to exit (under the deadline); its status.
 fn wait_exit(p: &mut Proc) -> std::process::ExitStatus {
     let deadline = Instant::now() + TIMEOUT;
@@ -666,15 +679,7 @@ fn a_run_takes_one_worker_fingerprint_and_a_resume_without_it_ends() {
     // reports another joins, with more slots.
     let w = worker(&dir, &ep, 1, 150, &[]);
     wait_line(&c, "fingerprint is pinned");
-    let faulty = Proc::spawn(
-        naofarm()
-            .args(["worker", "--connect", &ep, "--slots", "4"])
-            .env("NAOFARM_FAULT_FINGERPRINT", "1")
-            .env("RUST_LOG", "warn")
-            .stdout(Stdio::null()),
-        &dir,
-        "faulty-worker",
-    );
+    let faulty = faulty_worker(&dir, &ep, 4, "NAOFARM_FAULT_FINGERPRINT", "1");
     wait_line(&faulty, "will not serve the run");
     // A worker of an older build asks again after each refusal: each is
     // answered, and none brings an advert (which would bring the next ask).
@@ -751,14 +756,7 @@ fn a_run_takes_one_worker_fingerprint_and_a_resume_without_it_ends() {
     // it says so and exits 1 instead of waiting; its history is kept.
     let before = std::fs::read(out.join("journal.nfj")).unwrap();
     let mut c2 = coordinator_with(&dir, &exp, &out, &ep, &["--iterations", "12"]);
-    let _faulty2 = Proc::spawn(
-        naofarm()
-            .args(["worker", "--connect", &ep, "--slots", "2"])
-            .env("NAOFARM_FAULT_FINGERPRINT", "1")
-            .stdout(Stdio::null()),
-        &dir,
-        "faulty-worker",
-    );
+    let _faulty2 = faulty_worker(&dir, &ep, 2, "NAOFARM_FAULT_FINGERPRINT", "1");
     let status = wait_exit(&mut c2);
     assert_eq!(status.code(), Some(1), "{}", c2.stderr());
     let err = c2.stderr();
@@ -1119,15 +1117,7 @@ fn a_worker_gives_back_at_once_the_trials_it_cannot_read() {
     let (_router, ep) = router(&dir);
     let out = dir.join("run");
     let mut c = coordinator_with(&dir, &exp, &out, &ep, &["--lease-s", "600"]);
-    let faulty = Proc::spawn(
-        naofarm()
-            .args(["worker", "--connect", &ep, "--slots", "4"])
-            .env("NAOFARM_FAULT_GRANT", "unknown-param")
-            .env("RUST_LOG", "warn")
-            .stdout(Stdio::null()),
-        &dir,
-        "faulty-worker",
-    );
+    let faulty = faulty_worker(&dir, &ep, 4, "NAOFARM_FAULT_GRANT", "unknown-param");
     let why = wait_line(&faulty, "will not serve the run");
     assert!(why.contains("no_such_parameter"), "{why}");
     assert!(faulty

@@ -127,15 +127,19 @@ pub trait WireMessage: Serialize + DeserializeOwned + Sized {
 
     /// Decodes and checks a message.
     fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
-        let value = Self::decode_unchecked(bytes)?;
-        value
-            .validate()
+        Self::decode_unchecked(bytes)?.checked()
+    }
+
+    /// This message if its fields pass [`WireMessage::validate`], else
+    /// the field and the problem.
+    fn checked(self) -> Result<Self, DecodeError> {
+        self.validate()
             .map_err(|(field, problem)| DecodeError::Field {
                 message: Self::NAME,
                 field,
                 problem,
             })?;
-        Ok(value)
+        Ok(self)
     }
 
     /// Decodes the envelope and body without the field checks of
@@ -196,14 +200,7 @@ pub trait WireMessage: Serialize + DeserializeOwned + Sized {
             message: Self::NAME,
             detail: e.to_string(),
         })?;
-        value
-            .validate()
-            .map_err(|(field, problem)| DecodeError::Field {
-                message: Self::NAME,
-                field,
-                problem,
-            })?;
-        Ok(value)
+        value.checked()
     }
 }
 
