@@ -411,6 +411,19 @@ fn a_nao_report_has_an_animated_replay_of_expert_optim1_and_optim2() {
             trial.arg(flag).arg(physics[key].to_string());
         }
         let t: serde_json::Value = serde_json::from_slice(&succeed(&mut trial).stdout).unwrap();
+        // The plan's travel, the same from both, and mx over it: how far
+        // the set walks as planned (no sliding or lunging passed off).
+        let planned = column["planned_m"].as_f64().unwrap();
+        assert_eq!(t["planned_m"].as_f64(), Some(planned), "{name}");
+        let over = column["mx_over_planned"].as_f64().unwrap();
+        assert_eq!(over, column["mx"].as_f64().unwrap() / planned, "{name}");
+        if k == 0 {
+            assert!(
+                (0.9..=1.1).contains(&over),
+                "the expert walks as planned: {over}"
+            );
+            assert!(md.contains("| mx / planned |"), "{md}");
+        }
         let sim_s = t["trials"][0]["sim_time_s"].as_f64().unwrap();
         let want = sim_s * 12.5;
         assert!(

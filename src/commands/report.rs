@@ -29,6 +29,8 @@ struct Row {
     name: &'static str,
     params: Vec<f64>,
     stats: Stats,
+    /// How far the set's walk plans to go in a trial, m (NAO runs).
+    planned: Option<f64>,
 }
 
 /// What one run's report found, for the page over several runs.
@@ -419,23 +421,21 @@ fn table_iv(
     rows.into_iter()
         .map(|(name, params)| {
             let ms = run_trials(exp, &params, trials, threads)?;
+            let planned = worker::planned_x_m(&table_request(exp, &params, 0))
+                .map_err(|e| Failure::Job(anyhow!("Table IV plan of {name}: {e}")))?;
             Ok(Row {
                 name,
                 stats: stats(&ms),
                 params,
+                planned,
             })
         })
         .collect()
 }
 
-/// `trials` trials of one parameter set, in parallel, in seed order.
-fn run_trials(
-    exp: &Experiment,
-    params: &[f64],
-    trials: u32,
-    threads: usize,
-) -> Result<Vec<protocol::measurement::Measurement>, Failure> {
-    let request = |k: u32| TrialRequest {
+/// Table IV's trial `k` of one parameter set, exactly as a farm worker gets it.
+fn table_request(exp: &Experiment, params: &[f64], k: u32) -> TrialRequest {
+    TrialRequest {
         run: String::new(),
         iteration: 0,
         trial: k,
@@ -447,10 +447,29 @@ fn run_trials(
         dispatch: 0,
         physics: exp.physics,
         walk: exp.walk,
-    };
+    }
+}
+
+/// mx over the plan's travel: near 1 for a set that walks as planned, well
+/// above it for one that slides or lunges.
+fn over_plan(r: &Row) -> Option<f64> {
+    match (r.stats.mx, r.planned) {
+        (Some(mx), Some(p)) if p > 0.0 => Some(mx / p),
+        _ => None,
+    }
+}
+
+/// `trials` trials of one parameter set, in parallel, in seed order.
+fn run_trials(
+    exp: &Experiment,
+    params: &[f64],
+    trials: u32,
+    threads: usize,
+) -> Result<Vec<protocol::measurement::Measurement>, Failure> {
     trial::in_parallel(u64::from(trials), threads, |k| {
         let k = k as u32;
-        worker::run_trial(&request(k)).map_err(|e| Failure::Job(anyhow!("Table IV trial {k}: {e}")))
+        worker::run_trial(&table_request(exp, params, k))
+            .map_err(|e| Failure::Job(anyhow!("Table IV trial {k}: {e}")))
     })
     .map_err(|e| Failure::Job(anyhow!("Table IV trials: {e}")))?
     .into_iter()
@@ -520,6 +539,12 @@ fn table_text(exp: &Experiment, rows: &[Row], trials: u32) -> (String, String) {
     line("mx / Expert", &|r| {
         ratio(r).map_or("–".into(), |v| format!("{v:.2}×"))
     });
+    if nao {
+        line("planned (m)", &|r| cell(r.planned));
+        line("mx / planned", &|r| {
+            over_plan(r).map_or("–".into(), |v| format!("{v:.2}"))
+        });
+    }
     let json: Vec<serde_json::Value> = rows
         .iter()
         .map(|r| {
@@ -539,6 +564,8 @@ fn table_text(exp: &Experiment, rows: &[Row], trials: u32) -> (String, String) {
                 "ex": r.stats.ex,
                 "ey": r.stats.ey,
                 "mx_over_expert": ratio(r),
+                "planned_m": r.planned,
+                "mx_over_planned": over_plan(r),
             })
         })
         .collect();
@@ -707,6 +734,11 @@ fn index_html(
         (Some(a), Some(b)) if b > 0.0 => format!("{:.2}×", a / b),
         _ => "–".into(),
     });
+    if rows.iter().any(|r| r.planned.is_some()) {
+        line("mx / planned", &|r| {
+            over_plan(r).map_or("–".into(), |v| format!("{v:.2}"))
+        });
+    }
     h += "</table>\n";
     if !replays.is_empty() {
         h += "<h2>Watch them walk</h2>\n<p>The first Table IV trial of each set, re-simulated \

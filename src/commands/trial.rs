@@ -139,6 +139,8 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     let s = stats(&results);
     let diverged = runs.iter().filter(|t| t.diverged).count();
     if a.json {
+        let planned = trial::planned_travel_m(robot_type, &values, duration, engine)
+            .map_err(|e| Failure::Job(e.into()))?;
         let v = serde_json::json!({
             "params": params_json(&params),
             "robot_type": robot_type,
@@ -150,6 +152,7 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             "my": s.my,
             "ex": s.ex,
             "ey": s.ey,
+            "planned_m": planned,
             "trials": runs.iter().map(trial_json).collect::<Vec<_>>(),
             "diverged": diverged,
             "worst_stop_excess": worst_stop_excess(&runs).map(|(t, e)| {

@@ -32,6 +32,24 @@ pub enum TrialError {
     Model(String),
 }
 
+/// How far the request's walk plans to carry the robot over its trial, m
+/// ([`nao::trial::planned_travel_m`]); none for the synthetic model.
+pub fn planned_x_m(req: &TrialRequest) -> Result<Option<f64>, TrialError> {
+    let params = protocol::params::ParamValues::from_named(&req.params)
+        .map_err(|e| TrialError::Model(e.to_string()))?;
+    match req.model {
+        TrialModel::Synthetic => Ok(None),
+        TrialModel::Nao => nao::trial::planned_travel_m(
+            req.robot_type,
+            &params,
+            req.duration_s,
+            nao::trial::Engine::of(req.walk),
+        )
+        .map(Some)
+        .map_err(|e| TrialError::Model(e.to_string())),
+    }
+}
+
 /// Runs one trial: a pure function of the request.
 pub fn run_trial(req: &TrialRequest) -> Result<Measurement, TrialError> {
     let params = protocol::params::ParamValues::from_named(&req.params)

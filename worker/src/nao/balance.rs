@@ -161,11 +161,8 @@ impl Balance {
 
 #[cfg(test)]
 mod tests {
-    use super::*;
-    use crate::nao::model::NaoModel;
     use crate::nao::sim::SimSettings;
     use crate::nao::trial::{self, run, run_many, Batch, Engine, NaoTrial, WalkEngine};
-    use crate::nao::walk::Gait;
     use protocol::params::ParamValues;
 
     fn closed() -> Engine {
@@ -209,9 +206,7 @@ mod tests {
         assert!(s >= 0.7, "s = {s}");
         assert!(mx >= 4.0, "mx = {mx}");
         assert!(my / mx <= 0.25, "my/mx = {}", my / mx);
-        let model = NaoModel::with_params(0, params).unwrap();
-        let gait = Gait::with_config(&model, params.walk(), 10.0, GAIT.with_params(params));
-        let planned = gait.state(10.0).hip[0] - gait.state(0.0).hip[0];
+        let planned = trial::planned_travel_m(0, params, 10.0, closed()).unwrap();
         assert!(
             (mx - planned).abs() <= 0.1 * planned,
             "walked {mx} m, planned {planned} m"

@@ -191,6 +191,25 @@ pub enum NaoTrialError {
     Panicked(String),
 }
 
+/// How far the walk's plan carries the hip forward over a trial of
+/// `duration_s`, m: what a trial walks if it walks as planned (no sliding
+/// or lunging passed off as walking).
+pub fn planned_travel_m(
+    robot_type: u8,
+    params: &ParamValues,
+    duration_s: f64,
+    engine: Engine,
+) -> Result<f64, NaoTrialError> {
+    let model = NaoModel::with_params(robot_type, params)?;
+    let gait = Gait::with_config(
+        &model,
+        params.walk(),
+        duration_s,
+        engine.gait.with_params(params),
+    );
+    Ok(gait.state(duration_s).hip[0] - gait.state(0.0).hip[0])
+}
+
 /// Runs one trial of parameter set `params` (named; unset ones at expert).
 pub fn run(
     robot_type: u8,
