@@ -734,7 +734,7 @@ fn index_html(
         (Some(a), Some(b)) if b > 0.0 => format!("{:.2}×", a / b),
         _ => "–".into(),
     });
-    if rows.iter().any(|r| r.planned.is_some()) {
+    if exp.model == TrialModel::Nao {
         line("mx / planned", &|r| {
             over_plan(r).map_or("–".into(), |v| format!("{v:.2}"))
         });

@@ -32,11 +32,16 @@ pub enum TrialError {
     Model(String),
 }
 
+/// The request's parameters by name (unset ones at expert).
+fn params_of(req: &TrialRequest) -> Result<protocol::params::ParamValues, TrialError> {
+    protocol::params::ParamValues::from_named(&req.params)
+        .map_err(|e| TrialError::Model(e.to_string()))
+}
+
 /// How far the request's walk plans to carry the robot over its trial, m
 /// ([`nao::trial::planned_travel_m`]); none for the synthetic model.
 pub fn planned_x_m(req: &TrialRequest) -> Result<Option<f64>, TrialError> {
-    let params = protocol::params::ParamValues::from_named(&req.params)
-        .map_err(|e| TrialError::Model(e.to_string()))?;
+    let params = params_of(req)?;
     match req.model {
         TrialModel::Synthetic => Ok(None),
         TrialModel::Nao => nao::trial::planned_travel_m(
@@ -52,8 +57,7 @@ pub fn planned_x_m(req: &TrialRequest) -> Result<Option<f64>, TrialError> {
 
 /// Runs one trial: a pure function of the request.
 pub fn run_trial(req: &TrialRequest) -> Result<Measurement, TrialError> {
-    let params = protocol::params::ParamValues::from_named(&req.params)
-        .map_err(|e| TrialError::Model(e.to_string()))?;
+    let params = params_of(req)?;
     match req.model {
         TrialModel::Synthetic => Ok(synthetic::trial(&params, req.seed, req.duration_s)),
         TrialModel::Nao => {

@@ -322,36 +322,27 @@ pub async fn serve(
                     let got = u32::try_from(trials.len() + unreadable.len()).unwrap_or(u32::MAX);
                     share.granted(&run, asked, got, ready);
                     // Trials this build cannot read (another parameter
-                    // registry): given back at once, refused with the reason,
-                    // so that the run offers them to other workers instead
-                    // of waiting out their lease; this build never can.
-                    for (req, why) in unreadable {
-                        share.done(&run, None);
-                        if req.run != run {
-                            tracing::warn!(run, other = %req.run, "a grant held another run's trial; ignored");
-                            continue;
-                        }
-                        tracing::warn!(run, iteration = req.iteration, trial = req.trial, %why, "giving back a trial this worker cannot read");
-                        if share.unservable(&run, &why) {
-                            tracing::warn!(run, %why, "this worker will not serve the run");
-                        }
-                        summary.refused += 1;
-                        let fkeys = FleetKeys::new(&prefix, &req.run);
-                        put_message(&session, &fkeys.failures(), &give_back(&req, &id, why, true)).await;
-                    }
-                    for req in trials {
+                    // registry) come first, each with why: like a trial
+                    // beyond this worker's limits, each is given back at
+                    // once, refused with the reason, so that the run offers
+                    // it to other workers instead of waiting out its lease.
+                    let unreadable = unreadable.into_iter().map(|(req, why)| (req, Some(why)));
+                    for (req, unread) in unreadable.chain(trials.into_iter().map(|req| (req, None))) {
                         if req.run != run {
                             tracing::warn!(run, other = %req.run, "a grant held another run's trial; ignored");
                             share.done(&run, None);
                             continue;
                         }
-                        let fkeys = FleetKeys::new(&prefix, &req.run);
-                        if let Some(why) = cfg.beyond_limits(&req) {
+                        if let Some(why) = &unread {
+                            tracing::warn!(run, iteration = req.iteration, trial = req.trial, %why, "giving back a trial this worker cannot read");
+                        }
+                        if let Some(why) = unread.or_else(|| cfg.beyond_limits(&req)) {
                             if share.unservable(&run, &why) {
                                 tracing::warn!(run, %why, "this worker will not serve the run");
                             }
                             share.done(&run, None);
                             summary.refused += 1;
+                            let fkeys = FleetKeys::new(&prefix, &req.run);
                             put_message(&session, &fkeys.failures(), &give_back(&req, &id, why, true)).await;
                             continue;
                         }
