@@ -512,6 +512,10 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
     let closed_share = rtf(closed) / rtf(headline);
     let converged = &rows[converged];
     let converged_share = rtf(converged) / rtf(headline);
+    // What a physics step costs there against the default's: about the same,
+    // so the converged walk's share follows its steps per cycle (docs/walk.md,
+    // "Why no code speed-up meets the 80 % on converged physics").
+    let converged_step_share = sps(converged) / sps(closed);
     if a.json {
         let v = serde_json::json!({
             "realtime_factor": rtf(headline),
@@ -521,6 +525,7 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             "closed_loop_share_of_open_loop": closed_share,
             "converged_realtime_factor": rtf(converged),
             "converged_share_of_open_loop": converged_share,
+            "converged_steps_per_second_share": converged_step_share,
             "rows": rows.iter().map(|r| serde_json::json!({
                 "settings": r.label,
                 "motion": r.motion,
@@ -562,6 +567,12 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             "closed-loop walk of the converged experiments: {:.1}x real time, {:.0} % of the open loop's at the default",
             rtf(converged),
             100.0 * converged_share
+        );
+        outln!(
+            "  per physics step: {:.2}x the default closed loop's steps/s, with {} steps per cycle against {}",
+            converged_step_share,
+            converged.settings.substeps,
+            closed.settings.substeps
         );
     }
     Ok(())
