@@ -28,7 +28,7 @@ def f(v, fmt=".3f"):
     return "–" if v is None else format(v, fmt)
 
 
-def space(experiment):
+def parameter_space(experiment):
     """L as (name, lower, upper, expert): the file's, or experiment 2's."""
     if experiment is None:
         return L
@@ -63,12 +63,12 @@ def main():
     ap.add_argument("--experiment", default=None)
     ap.add_argument("--no-sweeps", action="store_true")
     a = ap.parse_args()
-    space_ = space(a.experiment)
+    space = parameter_space(a.experiment)
     if a.experiment is not None:
         print(f"(L, expert set, walk and physics of `{a.experiment}`)\n")
     if not a.no_sweeps:
         print(f"## Sweeps ({a.trials} trials per point, seed 3; others at expert)\n")
-    for name, lo, hi, _ in ([] if a.no_sweeps else space_):
+    for name, lo, hi, _ in ([] if a.no_sweeps else space):
         print(f"### {name}\n\n| value | s | mx (m) | my (m) | planned (m) | past a stop (°) |"
               "\n|---|---|---|---|---|---|")
         for i in range(a.points):
@@ -80,7 +80,7 @@ def main():
     rng = random.Random(1)
     rows = []
     for k in range(a.sets):
-        p = {n: round(rng.uniform(lo, hi), 5) for n, lo, hi, _ in space_}
+        p = {n: round(rng.uniform(lo, hi), 5) for n, lo, hi, _ in space}
         r = trial(a.bin, p, a.set_trials, 1000 + 100 * k, a.experiment)
         rows.append((r["mx"] if r["s"] >= 0.9 else -1.0, r, p))
         r["mx"] = r["mx"] or 0.0
@@ -93,22 +93,22 @@ def main():
           f"max {mxs[-1]:.3f} m")
     print("\nThe ten best sets with s ≥ 0.9:\n")
     print("| mx | s | my | planned | past a stop (°) | "
-          + " | ".join(n for n, *_ in space_) + " |")
-    print("|---" * (5 + len(space_)) + "|")
+          + " | ".join(n for n, *_ in space) + " |")
+    print("|---" * (5 + len(space)) + "|")
     for _, r, p in sorted(ok, key=lambda x: -x[0])[:10]:
         print(f"| {r['mx']:.3f} | {r['s']:.2f} | {f(r['my'])} | {f(r['planned_m'])} | "
-              f"{stop(r)} | " + " | ".join(f"{p[n]:.4f}" for n, *_ in space_) + " |")
+              f"{stop(r)} | " + " | ".join(f"{p[n]:.4f}" for n, *_ in space) + " |")
     print(f"\nThe five sets farthest past a stop of the {len(rows)}:\n")
     print("| past a stop (°) | at (s) | mx | s | planned | "
-          + " | ".join(n for n, *_ in space_) + " |")
-    print("|---" * (5 + len(space_)) + "|")
+          + " | ".join(n for n, *_ in space) + " |")
+    print("|---" * (5 + len(space)) + "|")
     far = sorted(rows, key=lambda x: -((x[1].get("worst_stop_excess") or {}).get("deg", 0.0)))
     for _, r, p in far[:5]:
         w = r.get("worst_stop_excess") or {}
         fell = [t["fall_time_s"] for t in r["trials"] if t["seed"] == w.get("seed")]
         at = f"{w.get('time_s', 0):.2f}" + (f", fell {fell[0]:.2f}" if fell and fell[0] else "")
         print(f"| {stop(r)} | {at} | {f(r['mx'])} | {r['s']:.2f} | {f(r['planned_m'])} | "
-              + " | ".join(f"{p[n]:.4f}" for n, *_ in space_) + " |")
+              + " | ".join(f"{p[n]:.4f}" for n, *_ in space) + " |")
 
 
 if __name__ == "__main__":
