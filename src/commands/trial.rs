@@ -160,6 +160,10 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
                 v["seed"] = serde_json::json!(t.seed);
                 v
             }),
+            "speed_capped": speed_capped_shares(&runs)
+                .into_iter()
+                .map(|(joint, share)| (joint, serde_json::json!(share)))
+                .collect::<serde_json::Map<_, _>>(),
             "wall_s": wall,
         });
         outln!("{v}");
@@ -190,6 +194,19 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
                 t.seed
             ),
             None => outln!("no joint went past its stops"),
+        }
+        let mut capped = speed_capped_shares(&runs);
+        capped.sort_by(|a, b| b.1.total_cmp(&a.1));
+        if !capped.is_empty() {
+            let most: Vec<String> = capped
+                .iter()
+                .take(6)
+                .map(|(j, share)| format!("{j} {:.0} %", 100.0 * share))
+                .collect();
+            outln!(
+                "commands clamped at the speed cap, share of cycles: {}",
+                most.join(", ")
+            );
         }
         outln!(
             "{:.1} trials/s on {threads} threads ({wall:.2} s wall)",
@@ -326,7 +343,30 @@ fn trial_json(t: &NaoTrial) -> serde_json::Value {
         "diverged": t.diverged,
         "sim_time_s": m.sim_time_s,
         "stop_excess": t.stop_excess.iter().map(stop_excess_json).collect::<Vec<_>>(),
+        "cycles": t.cycles,
+        "speed_capped": t
+            .speed_capped
+            .iter()
+            .map(|c| (c.joint.clone(), serde_json::json!(c.cycles)))
+            .collect::<serde_json::Map<_, _>>(),
     })
+}
+
+/// Each joint's share of all the trials' cycles whose command the servo
+/// clamped at the joint's speed cap, in model order (joints never clamped
+/// left out).
+fn speed_capped_shares(runs: &[NaoTrial]) -> Vec<(String, f64)> {
+    let cycles: u64 = runs.iter().map(|t| t.cycles).sum();
+    let mut out: Vec<(String, u64)> = Vec::new();
+    for c in runs.iter().flat_map(|t| &t.speed_capped) {
+        match out.iter_mut().find(|(j, _)| *j == c.joint) {
+            Some((_, n)) => *n += c.cycles,
+            None => out.push((c.joint.clone(), c.cycles)),
+        }
+    }
+    out.into_iter()
+        .map(|(j, n)| (j, n as f64 / cycles.max(1) as f64))
+        .collect()
 }
 
 /// A joint's worst overrun past its stops as `trial --json` lists it.

@@ -564,6 +564,14 @@ impl Sim {
         self.hinges.get(joint).is_some_and(Option::is_some)
     }
 
+    /// Each model joint's speed cap in this world, rad/s (the model's, times
+    /// [`SimSettings::speed_cap_scale`] where it applies); `None` for a welded
+    /// joint. [`Sim::step`] clamps a command to it.
+    #[must_use]
+    pub fn speed_caps(&self) -> Vec<Option<f32>> {
+        self.hinges.iter().map(|h| h.map(|h| h.max_speed)).collect()
+    }
+
     /// Current hinge angles, one per model joint (welded ones at their weld), rad.
     #[must_use]
     pub fn joint_angles(&self) -> Vec<f64> {

@@ -131,6 +131,21 @@ pub struct NaoTrial {
     /// Every joint that went past one of its stops (read at the end of each
     /// cycle), at its worst, in model order.
     pub stop_excess: Vec<StopExcess>,
+    /// Every joint whose command the servo clamped to its speed cap in some
+    /// cycle, with how many cycles, in model order.
+    pub speed_capped: Vec<SpeedCapped>,
+    /// Cycles run (the trial's end or fall).
+    pub cycles: u64,
+}
+
+/// How often a joint's commanded speed was beyond its cap during a trial:
+/// the servo then turned at the cap and the joint lagged its target.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SpeedCapped {
+    /// The joint's name.
+    pub joint: String,
+    /// Cycles whose command the servo clamped.
+    pub cycles: u64,
 }
 
 /// How far a joint went past one of its stops during a trial, at its worst.
@@ -172,6 +187,42 @@ impl Overruns {
                     rad,
                     time_s,
                 })
+            })
+            .collect()
+    }
+}
+
+/// Counts, per joint, the cycles whose command is beyond the joint's speed cap.
+struct Capped {
+    caps: Vec<Option<f32>>,
+    cycles: Vec<u64>,
+}
+
+impl Capped {
+    fn new(sim: &Sim) -> Self {
+        let caps = sim.speed_caps();
+        let cycles = vec![0; caps.len()];
+        Self { caps, cycles }
+    }
+
+    /// The same test as [`Sim::step`]'s clamp, in its precision.
+    fn fold(&mut self, commands: &[f64]) {
+        for ((cap, n), c) in self.caps.iter().zip(&mut self.cycles).zip(commands) {
+            if cap.is_some_and(|cap| (*c as f32).abs() > cap) {
+                *n += 1;
+            }
+        }
+    }
+
+    fn list(&self, model: &NaoModel) -> Vec<SpeedCapped> {
+        model
+            .joints
+            .iter()
+            .zip(&self.cycles)
+            .filter(|(_, n)| **n > 0)
+            .map(|(j, n)| SpeedCapped {
+                joint: j.name.clone(),
+                cycles: *n,
             })
             .collect()
     }
@@ -262,6 +313,8 @@ pub fn run_observed(
     let mut perception = sim.perceive();
     let mut fall_time_s = None;
     let mut overruns = Overruns::new(&model);
+    let mut capped = Capped::new(&sim);
+    let mut run = 0;
     for k in 0..cycles {
         let t = k as f64 * CYCLE_S;
         let q_next = gait.targets(&rest, t + CYCLE_S);
@@ -286,6 +339,8 @@ pub fn run_observed(
                     + ACTUATOR_NOISE_RAD_S * gauss(&mut rng)
             })
             .collect();
+        capped.fold(&cmd);
+        run = k + 1;
         perception = match sim.step(&cmd) {
             Ok(p) => p,
             Err(SimError::Diverged(t)) => {
@@ -301,6 +356,8 @@ pub fn run_observed(
                     },
                     diverged: true,
                     stop_excess: overruns.list(&model),
+                    speed_capped: capped.list(&model),
+                    cycles: run,
                 });
             }
             Err(e) => return Err(e.into()),
@@ -325,6 +382,8 @@ pub fn run_observed(
         },
         diverged: false,
         stop_excess: overruns.list(&model),
+        speed_capped: capped.list(&model),
+        cycles: run,
     })
 }
 
