@@ -353,8 +353,8 @@ fn trial_json(t: &NaoTrial) -> serde_json::Value {
 }
 
 /// Each joint's share of all the trials' cycles whose command the servo
-/// clamped at the joint's speed cap, in model order (joints never clamped
-/// left out).
+/// clamped at the joint's speed cap, in the order the trials first list the
+/// joints (joints never clamped left out).
 fn speed_capped_shares(runs: &[NaoTrial]) -> Vec<(String, f64)> {
     let cycles: u64 = runs.iter().map(|t| t.cycles).sum();
     let mut out: Vec<(String, u64)> = Vec::new();
