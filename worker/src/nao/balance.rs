@@ -430,16 +430,14 @@ mod tests {
             "../../../experiments/physical-technical-converged.toml"
         ));
         let capped = SimSettings::with_physics(&exp.physics);
-        let model =
-            crate::nao::model::NaoModel::new(crate::nao::model::Morphology::of_type(0).unwrap())
-                .unwrap();
+        let expert = ParamValues::from_named(&exp.full_params(&exp.expert_values())).unwrap();
+        let model = crate::nao::model::NaoModel::with_params(0, &expert).unwrap();
         let ankles = ["lle5", "rle5"].map(|n| model.joint_index(n).unwrap());
         let doubled = SimSettings {
             speed_cap_scale: 2.0,
             speed_cap_joints: ankles.iter().map(|j| 1u64 << j).sum(),
             ..capped
         };
-        let expert = ParamValues::from_named(&exp.full_params(&exp.expert_values())).unwrap();
         let walk = |physics: SimSettings| {
             let batch = Batch {
                 seed0: 3,
