@@ -285,6 +285,11 @@ mod tests {
         protocol::Experiment::from_toml(toml).unwrap()
     }
 
+    /// `exp`'s expert set with its fixed values, as a worker gets it.
+    fn expert_of(exp: &protocol::Experiment) -> ParamValues {
+        ParamValues::from_named(&exp.full_params(&exp.expert_values())).unwrap()
+    }
+
     /// `exp`'s L at its corners (those with the shortest steps only, or all
     /// 32) and its centre, each as every value a worker gets (fixed ones too).
     fn corners_of_l(exp: &protocol::Experiment, all: bool) -> Vec<Vec<(String, f64)>> {
@@ -387,7 +392,7 @@ mod tests {
             "../../../experiments/physical-technical-converged.toml"
         ));
         let physics = SimSettings::with_physics(&exp.physics);
-        let expert = ParamValues::from_named(&exp.full_params(&exp.expert_values())).unwrap();
+        let expert = expert_of(&exp);
         let (ts, s, mx, planned) = walks_at_pace_as_planned(&expert, 30, physics);
         for t in &ts {
             for e in &t.stop_excess {
@@ -430,7 +435,7 @@ mod tests {
             "../../../experiments/physical-technical-converged.toml"
         ));
         let capped = SimSettings::with_physics(&exp.physics);
-        let expert = ParamValues::from_named(&exp.full_params(&exp.expert_values())).unwrap();
+        let expert = expert_of(&exp);
         let model = crate::nao::model::NaoModel::with_params(0, &expert).unwrap();
         let ankles = ["lle5", "rle5"].map(|n| model.joint_index(n).unwrap());
         let doubled = SimSettings {
@@ -522,7 +527,7 @@ mod tests {
                 assert!(e.rad.to_degrees() <= 1.0, "seed {}: {e:?}", t.seed);
             }
         }
-        let expert = ParamValues::from_named(&exp.full_params(&exp.expert_values())).unwrap();
+        let expert = expert_of(&exp);
         let five = experiment(include_str!(
             "../../../experiments/physical-technical-converged.toml"
         ));
