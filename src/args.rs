@@ -432,8 +432,9 @@ pub struct TrialArgs {
     /// Move one of the robot's physical limits (KEY=VALUE, repeatable:
     /// `speed_cap_scale`, `speed_cap_joints` (name suffixes, comma-separated:
     /// the joints the scale applies to), `max_torque_nm`, `contact_hz`,
-    /// `contact_prediction_m`): to measure which
-    /// limit stops a walk (docs/walk.md); farm trials always use the league's.
+    /// `contact_prediction_m`, `friction_scale`: the trial's drawn ground
+    /// friction times this): to measure which limit stops a walk
+    /// (docs/walk.md); farm trials always use the league's.
     #[arg(long, value_name = "KEY=VALUE", hide = true)]
     pub limit: Vec<String>,
     /// Trial duration, simulated seconds (default 10, or the experiment's).

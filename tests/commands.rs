@@ -466,6 +466,17 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
     for f in ["seed", "fell", "x", "y", "fall_time_s"] {
         assert!(trials.iter().all(|t| t.get(f).is_some()), "{f}");
     }
+    // Each trial's distance, split by its feet, sums back to it.
+    for t in trials {
+        let w = &t["footwork"];
+        let sum: f64 = ["stepping_m", "sliding_m", "lean_m"]
+            .iter()
+            .map(|f| w[f].as_f64().unwrap())
+            .sum();
+        assert!((sum - t["x"].as_f64().unwrap()).abs() < 1e-9, "{t}");
+        assert!(w["plants"].as_u64().is_some(), "{t}");
+    }
+    assert!(a["planned_m"].as_f64().is_some_and(|p| p > 0.0), "{a}");
     let b = run("5");
     assert_eq!(a["mx"], b["mx"]);
     assert_eq!(a["trials"], b["trials"]);
@@ -489,6 +500,7 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
         "max_torque_nm",
         "contact_hz=inf",
         "speed_cap_joints=xyz",
+        "friction_scale=0",
     ] {
         let out = naofarm()
             .args(["trial", "--trials", "1", "--limit", bad])

@@ -8,6 +8,7 @@ use protocol::{
     measurement::Measurement, params::ParamValues, pickout::stats, TrialModel, WalkEngine,
 };
 use worker::nao::{
+    footwork::Footwork,
     model::NaoModel,
     replay::Replayed,
     sim::{SimSettings, CYCLE_S},
@@ -138,9 +139,10 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     let results: Vec<_> = runs.iter().map(|t| t.measurement).collect();
     let s = stats(&results);
     let diverged = runs.iter().filter(|t| t.diverged).count();
+    let planned = trial::planned_travel_m(robot_type, &values, duration, engine)
+        .map_err(|e| Failure::Job(e.into()))?;
+    let split = footwork_mean(&runs);
     if a.json {
-        let planned = trial::planned_travel_m(robot_type, &values, duration, engine)
-            .map_err(|e| Failure::Job(e.into()))?;
         let v = serde_json::json!({
             "params": params_json(&params),
             "robot_type": robot_type,
@@ -153,6 +155,7 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             "ex": s.ex,
             "ey": s.ey,
             "planned_m": planned,
+            "footwork": split.as_ref().map(footwork_json),
             "trials": runs.iter().map(trial_json).collect::<Vec<_>>(),
             "diverged": diverged,
             "worst_stop_excess": worst_stop_excess(&runs).map(|(t, e)| {
@@ -182,6 +185,17 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             f(s.ex),
             f(s.ey)
         );
+        outln!("the walk's plan: {planned:.3} m");
+        if let Some(w) = &split {
+            outln!(
+                "mx split by the feet: stepping {:.3} m, sliding {:.3} m, lean {:.3} m; \
+                 {} plants per trial",
+                w.stepping_m,
+                w.sliding_m,
+                w.lean_m,
+                w.plants
+            );
+        }
         if diverged > 0 {
             outln!("{diverged} of the falls were the physics diverging (counted as falls, no distance)");
         }
@@ -344,11 +358,39 @@ fn trial_json(t: &NaoTrial) -> serde_json::Value {
         "sim_time_s": m.sim_time_s,
         "stop_excess": t.stop_excess.iter().map(stop_excess_json).collect::<Vec<_>>(),
         "cycles": t.cycles,
+        "footwork": footwork_json(&t.footwork),
         "speed_capped": t
             .speed_capped
             .iter()
             .map(|c| (c.joint.clone(), serde_json::json!(c.cycles)))
             .collect::<serde_json::Map<_, _>>(),
+    })
+}
+
+/// The mean [`Footwork`] of the trials that did not fall (those `mx`
+/// averages), none if every trial fell; `plants` rounded down.
+fn footwork_mean(runs: &[NaoTrial]) -> Option<Footwork> {
+    let ok: Vec<&Footwork> = runs
+        .iter()
+        .filter(|t| !t.measurement.fell)
+        .map(|t| &t.footwork)
+        .collect();
+    let n = ok.len() as f64;
+    let mean = |f: fn(&Footwork) -> f64| ok.iter().map(|w| f(w)).sum::<f64>() / n;
+    (!ok.is_empty()).then(|| Footwork {
+        stepping_m: mean(|w| w.stepping_m),
+        sliding_m: mean(|w| w.sliding_m),
+        lean_m: mean(|w| w.lean_m),
+        plants: (mean(|w| f64::from(w.plants))) as u32,
+    })
+}
+
+fn footwork_json(w: &Footwork) -> serde_json::Value {
+    serde_json::json!({
+        "stepping_m": w.stepping_m,
+        "sliding_m": w.sliding_m,
+        "lean_m": w.lean_m,
+        "plants": w.plants,
     })
 }
 
@@ -460,10 +502,11 @@ fn move_limit(settings: &mut SimSettings, model: &NaoModel, kv: &str) -> Result<
         "max_torque_nm" => settings.max_torque_nm = v.min(1000.0),
         "contact_hz" => settings.contact_hz = v.min(10_000.0),
         "contact_prediction_m" => settings.contact_prediction_m = v.min(0.1),
+        "friction_scale" => settings.friction_scale = v.min(100.0),
         _ => {
             return Err(Failure::Usage(anyhow!(
                 "--limit: unknown limit `{k}` (speed_cap_scale, speed_cap_joints, \
-                 max_torque_nm, contact_hz, contact_prediction_m)"
+                 max_torque_nm, contact_hz, contact_prediction_m, friction_scale)"
             )))
         }
     }

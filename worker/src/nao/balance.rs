@@ -486,6 +486,105 @@ mod tests {
         );
     }
 
+    /// A trial's distance split by its feet (`footwork`): the three terms
+    /// sum to the distance, to the rounding.
+    fn assert_split_sums(t: &crate::nao::trial::NaoTrial) {
+        let w = t.footwork;
+        let sum = w.stepping_m + w.sliding_m + w.lean_m;
+        assert!(
+            (sum - t.measurement.x_m).abs() < 1e-9,
+            "seed {}: {w:?} sums to {sum}, x {}",
+            t.seed,
+            t.measurement.x_m
+        );
+    }
+
+    /// On converged physics a deep crouch (ThighRelHip2_Z −0.08, others at
+    /// expert) walks more than 1.15 × its plan (measured 1.23 ×), and the
+    /// feet show the surplus is steps: at least 97 % of the distance is the
+    /// feet's travel between plants, planted feet slide and the torso leans
+    /// ahead of them by at most 2 % (measured: 0.8 % and −0.5 %). Longer
+    /// strides than planned (the ankle pitch lagging at its speed cap, the
+    /// test above), not sliding or lunging passed off as walking.
+    #[test]
+    fn a_deep_crouch_walks_past_its_plan_by_longer_steps_not_sliding() {
+        let exp = experiment(include_str!(
+            "../../../experiments/physical-technical-converged.toml"
+        ));
+        let mut named = exp.full_params(&exp.expert_values());
+        for (n, v) in &mut named {
+            if n == "ThighRelHip2_Z" {
+                *v = -0.08;
+            }
+        }
+        let crouch = ParamValues::from_named(&named).unwrap();
+        let physics = SimSettings::with_physics(&exp.physics);
+        let batch = Batch {
+            seed0: 3,
+            n: 2,
+            threads: 2,
+        };
+        let ts = run_many(0, &crouch, batch, 10.0, physics, closed()).unwrap();
+        let planned = crate::nao::trial::planned_travel_m(0, &crouch, 10.0, closed()).unwrap();
+        for t in &ts {
+            assert!(!t.measurement.fell, "seed {} fell", t.seed);
+            assert_split_sums(t);
+            let (x, w) = (t.measurement.x_m, t.footwork);
+            assert!(
+                x > 1.15 * planned,
+                "seed {}: {x:.3} m, planned {planned:.3}",
+                t.seed
+            );
+            assert!(w.stepping_m >= 0.97 * x, "seed {}: {w:?}, x {x:.3}", t.seed);
+            assert!(w.sliding_m.abs() <= 0.02 * x, "seed {}: {w:?}", t.seed);
+            assert!(w.lean_m.abs() <= 0.02 * x, "seed {}: {w:?}", t.seed);
+        }
+    }
+
+    /// The split tells sliding and lunging apart from steps. On the league's
+    /// floor the expert walk (the farm's physics) slides and leans by under
+    /// 5 cm (measured −0.001 m and −0.028 m over 10 trials); with the ground's
+    /// friction a fifth of the trial's draw every trial falls, its planted
+    /// feet slide back by more than 3 cm (measured 7–24 cm) and the fallen
+    /// torso is more than 10 cm ahead of its feet (measured 20–26 cm).
+    #[test]
+    fn a_slippery_floor_shows_as_sliding_and_a_fall_as_lean() {
+        let exp = experiment(include_str!("../../../experiments/physical-technical.toml"));
+        let expert = expert_of(&exp);
+        let league = SimSettings::with_physics(&exp.physics);
+        let slippery = SimSettings {
+            friction_scale: 0.2,
+            ..league
+        };
+        let batch = Batch {
+            seed0: 3,
+            n: 2,
+            threads: 2,
+        };
+        for t in run_many(0, &expert, batch, 10.0, league, closed()).unwrap() {
+            assert!(!t.measurement.fell, "seed {} fell", t.seed);
+            assert_split_sums(&t);
+            let w = t.footwork;
+            assert!(
+                w.sliding_m.abs() < 0.05 && w.lean_m.abs() < 0.05,
+                "seed {}: {w:?}",
+                t.seed
+            );
+            assert!(w.plants >= 50, "seed {}: {w:?}", t.seed);
+        }
+        for t in run_many(0, &expert, batch, 10.0, slippery, closed()).unwrap() {
+            assert!(
+                t.measurement.fell,
+                "seed {} walked on the slippery floor",
+                t.seed
+            );
+            assert_split_sums(&t);
+            let w = t.footwork;
+            assert!(w.sliding_m < -0.03, "seed {}: {w:?}", t.seed);
+            assert!(w.lean_m > 0.1, "seed {}: {w:?}", t.seed);
+        }
+    }
+
     /// The pace issue's 6.0 m, reached on converged physics with the step
     /// period co-optimised (`experiments/physical-technical-converged-period.toml`):
     /// the best set its 500 iterations found (Optim.1, iteration 369, as

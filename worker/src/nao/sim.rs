@@ -76,6 +76,10 @@ pub struct SimSettings {
     pub speed_cap_joints: u64,
     /// Most torque a servo applies, N·m ([`MAX_TORQUE_NM`]: the league's).
     pub max_torque_nm: f64,
+    /// A trial's drawn ground friction times this (1: as drawn): kept to
+    /// measure a walk on a slippery floor (`naofarm trial --limit`), not
+    /// for trials.
+    pub friction_scale: f64,
 }
 
 impl Default for SimSettings {
@@ -99,6 +103,7 @@ impl Default for SimSettings {
             speed_cap_scale: 1.0,
             speed_cap_joints: 0,
             max_torque_nm: MAX_TORQUE_NM,
+            friction_scale: 1.0,
         }
     }
 }
@@ -412,6 +417,9 @@ impl Sim {
             if b.name.ends_with("foot") || b.name.ends_with("toe") {
                 feet[side].push(h);
             }
+        }
+        if feet.iter().any(Vec::is_empty) {
+            return Err(SimError::Settings("a robot without both feet".into()));
         }
         // Joints (bodies inserted at their posed places: anchors are given in each
         // body's own frame, which is the zero-pose frame carried along).
@@ -733,6 +741,18 @@ impl Sim {
             torso_rotation: [q.i, q.j, q.k, q.w],
             torso_tilt_rad: libm::acos(up.z.clamp(-1.0, 1.0)),
         }
+    }
+
+    /// Ground truth, for measurements: each foot's (left, right) centre in
+    /// the world frame, m.
+    #[must_use]
+    pub fn feet_centres(&self) -> [[f64; 3]; 2] {
+        std::array::from_fn(|side| {
+            let t = self.world.colliders[self.feet[side][0]]
+                .position()
+                .translation;
+            [f64::from(t.x), f64::from(t.y), f64::from(t.z)]
+        })
     }
 
     /// Ground contact force on one foot (0 left, 1 right) over the last physics step, N.

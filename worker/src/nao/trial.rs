@@ -16,6 +16,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::balance::{Balance, Gains};
+use super::footwork::{Footwork, Tracker};
 use super::model::{ModelError, NaoModel};
 use super::sim::{fallen, standing_angles, Perception, Sim, SimError, SimSettings, Start, CYCLE_S};
 use super::walk::{Gait, GaitConfig, WalkParams};
@@ -136,6 +137,9 @@ pub struct NaoTrial {
     pub speed_capped: Vec<SpeedCapped>,
     /// Cycles run (the trial's end or fall).
     pub cycles: u64,
+    /// The distance walked split by what the feet did (over the cycles run;
+    /// a diverged trial's up to its last sane cycle).
+    pub footwork: Footwork,
 }
 
 /// How often a joint's commanded speed was beyond its cap during a trial:
@@ -304,7 +308,8 @@ pub fn run_observed(
         .iter()
         .map(|q| q + rng.random_range(-jitter..=jitter))
         .collect();
-    settings.friction = rng.random_range(FRICTION_RANGE.0..=FRICTION_RANGE.1);
+    settings.friction =
+        rng.random_range(FRICTION_RANGE.0..=FRICTION_RANGE.1) * settings.friction_scale;
     let mut sim = Sim::new(&model, settings, &Start::upright(start))?;
     let p0 = sim.perceive().torso_position_m;
     let cycles = (duration_s / CYCLE_S).round() as u64;
@@ -314,6 +319,7 @@ pub fn run_observed(
     let mut fall_time_s = None;
     let mut overruns = Overruns::new(&model);
     let mut capped = Capped::new(&sim);
+    let mut footwork = Tracker::new(&sim, &perception);
     let mut run = 0;
     for k in 0..cycles {
         let t = k as f64 * CYCLE_S;
@@ -358,12 +364,14 @@ pub fn run_observed(
                     stop_excess: overruns.list(&model),
                     speed_capped: capped.list(&model),
                     cycles: run,
+                    footwork: footwork.footwork(),
                 });
             }
             Err(e) => return Err(e.into()),
         };
         q_now = q_next;
         overruns.fold(&model, &perception.joint_angles_rad, perception.time_s);
+        footwork.fold(&sim, &perception);
         observe(&sim, &perception);
         if fallen(&perception) {
             fall_time_s = Some(perception.time_s);
@@ -384,6 +392,7 @@ pub fn run_observed(
         stop_excess: overruns.list(&model),
         speed_capped: capped.list(&model),
         cycles: run,
+        footwork: footwork.footwork(),
     })
 }
 
