@@ -417,12 +417,35 @@ fn a_nao_report_has_an_animated_replay_of_expert_optim1_and_optim2() {
         assert_eq!(t["planned_m"].as_f64(), Some(planned), "{name}");
         let over = column["mx_over_planned"].as_f64().unwrap();
         assert_eq!(over, column["mx"].as_f64().unwrap() / planned, "{name}");
+        // The feet's split of mx sums back to it, and the trial's own
+        // split of its distance is the column's first trial's.
+        let w = &column["footwork"];
+        let split = |w: &serde_json::Value| -> f64 {
+            ["stepping_m", "sliding_m", "lean_m"]
+                .iter()
+                .map(|f| w[f].as_f64().unwrap())
+                .sum()
+        };
+        let mx = column["mx"].as_f64().unwrap();
+        assert!((split(w) - mx).abs() < 1e-9, "{name}: {w} against mx {mx}");
+        let x0 = t["trials"][0]["x"].as_f64().unwrap();
+        assert!(
+            (split(&t["trials"][0]["footwork"]) - x0).abs() < 1e-9,
+            "{t}"
+        );
         if k == 0 {
             assert!(
                 (0.9..=1.1).contains(&over),
                 "the expert walks as planned: {over}"
             );
             assert!(md.contains("| mx / planned |"), "{md}");
+            assert!(md.contains("| mx by sliding (m) |"), "{md}");
+            // The expert's distance is steps: it neither slides nor lunges.
+            assert!(
+                w["sliding_m"].as_f64().unwrap().abs() < 0.05 * mx
+                    && w["lean_m"].as_f64().unwrap().abs() < 0.05 * mx,
+                "{w}"
+            );
         }
         let sim_s = t["trials"][0]["sim_time_s"].as_f64().unwrap();
         let want = sim_s * 12.5;

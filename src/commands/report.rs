@@ -14,7 +14,7 @@ use plotters::prelude::*;
 use protocol::{
     params::ParamValues, pickout::stats, Decision, Experiment, Stats, TrialModel, TrialRequest,
 };
-use worker::nao::{sim::SimSettings, trial};
+use worker::nao::{footwork::Footwork, sim::SimSettings, trial};
 
 use crate::common::{note_tail, Failure};
 use crate::render;
@@ -31,6 +31,9 @@ struct Row {
     stats: Stats,
     /// How far the set's walk plans to go in a trial, m (NAO runs).
     planned: Option<f64>,
+    /// How the feet covered mx: the mean split of the trials that did not
+    /// fall (NAO runs; none if every trial fell).
+    footwork: Option<Footwork>,
 }
 
 /// What one run's report found, for the page over several runs.
@@ -420,14 +423,21 @@ fn table_iv(
     rows.push(("Optim.2", optim2));
     rows.into_iter()
         .map(|(name, params)| {
-            let ms = run_trials(exp, &params, trials, threads)?;
+            let runs = run_trials(exp, &params, trials, threads)?;
             let planned = worker::planned_x_m(&table_request(exp, &params, 0))
                 .map_err(|e| Failure::Job(anyhow!("Table IV plan of {name}: {e}")))?;
+            let ms: Vec<_> = runs.iter().map(|(m, _)| *m).collect();
+            let footwork = Footwork::mean(
+                runs.iter()
+                    .filter(|(m, _)| !m.fell)
+                    .filter_map(|(_, w)| w.as_ref()),
+            );
             Ok(Row {
                 name,
                 stats: stats(&ms),
                 params,
                 planned,
+                footwork,
             })
         })
         .collect()
@@ -459,16 +469,17 @@ fn over_plan(r: &Row) -> Option<f64> {
     }
 }
 
-/// `trials` trials of one parameter set, in parallel, in seed order.
+/// `trials` trials of one parameter set, in parallel, in seed order, each
+/// with how the feet covered its distance (NAO runs).
 fn run_trials(
     exp: &Experiment,
     params: &[f64],
     trials: u32,
     threads: usize,
-) -> Result<Vec<protocol::measurement::Measurement>, Failure> {
+) -> Result<Vec<(protocol::measurement::Measurement, Option<Footwork>)>, Failure> {
     trial::in_parallel(u64::from(trials), threads, |k| {
         let k = k as u32;
-        worker::run_trial(&table_request(exp, params, k))
+        worker::run_trial_with_footwork(&table_request(exp, params, k))
             .map_err(|e| Failure::Job(anyhow!("Table IV trial {k}: {e}")))
     })
     .map_err(|e| Failure::Job(anyhow!("Table IV trials: {e}")))?
@@ -544,6 +555,13 @@ fn table_text(exp: &Experiment, rows: &[Row], trials: u32) -> (String, String) {
         line("mx / planned", &|r| {
             over_plan(r).map_or("–".into(), |v| format!("{v:.2}"))
         });
+        line("mx by stepping (m)", &|r| {
+            cell(r.footwork.map(|w| w.stepping_m))
+        });
+        line("mx by sliding (m)", &|r| {
+            cell(r.footwork.map(|w| w.sliding_m))
+        });
+        line("mx by lean (m)", &|r| cell(r.footwork.map(|w| w.lean_m)));
     }
     let json: Vec<serde_json::Value> = rows
         .iter()
@@ -566,6 +584,7 @@ fn table_text(exp: &Experiment, rows: &[Row], trials: u32) -> (String, String) {
                 "mx_over_expert": ratio(r),
                 "planned_m": r.planned,
                 "mx_over_planned": over_plan(r),
+                "footwork": r.footwork,
             })
         })
         .collect();
@@ -737,6 +756,11 @@ fn index_html(
     if exp.model == TrialModel::Nao {
         line("mx / planned", &|r| {
             over_plan(r).map_or("–".into(), |v| format!("{v:.2}"))
+        });
+        line("mx by stepping / sliding / lean (m)", &|r| {
+            r.footwork.map_or("–".into(), |w| {
+                format!("{:.3} / {:.3} / {:.3}", w.stepping_m, w.sliding_m, w.lean_m)
+            })
         });
     }
     h += "</table>\n";

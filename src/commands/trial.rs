@@ -141,7 +141,12 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     let diverged = runs.iter().filter(|t| t.diverged).count();
     let planned = trial::planned_travel_m(robot_type, &values, duration, engine)
         .map_err(|e| Failure::Job(e.into()))?;
-    let split = footwork_mean(&runs);
+    // Over the trials that did not fall, the ones mx averages.
+    let split = Footwork::mean(
+        runs.iter()
+            .filter(|t| !t.measurement.fell)
+            .map(|t| &t.footwork),
+    );
     if a.json {
         let v = serde_json::json!({
             "params": params_json(&params),
@@ -155,7 +160,7 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             "ex": s.ex,
             "ey": s.ey,
             "planned_m": planned,
-            "footwork": split.as_ref().map(footwork_json),
+            "footwork": split,
             "trials": runs.iter().map(trial_json).collect::<Vec<_>>(),
             "diverged": diverged,
             "worst_stop_excess": worst_stop_excess(&runs).map(|(t, e)| {
@@ -358,39 +363,12 @@ fn trial_json(t: &NaoTrial) -> serde_json::Value {
         "sim_time_s": m.sim_time_s,
         "stop_excess": t.stop_excess.iter().map(stop_excess_json).collect::<Vec<_>>(),
         "cycles": t.cycles,
-        "footwork": footwork_json(&t.footwork),
+        "footwork": t.footwork,
         "speed_capped": t
             .speed_capped
             .iter()
             .map(|c| (c.joint.clone(), serde_json::json!(c.cycles)))
             .collect::<serde_json::Map<_, _>>(),
-    })
-}
-
-/// The mean [`Footwork`] of the trials that did not fall (those `mx`
-/// averages), none if every trial fell; `plants` rounded down.
-fn footwork_mean(runs: &[NaoTrial]) -> Option<Footwork> {
-    let ok: Vec<&Footwork> = runs
-        .iter()
-        .filter(|t| !t.measurement.fell)
-        .map(|t| &t.footwork)
-        .collect();
-    let n = ok.len() as f64;
-    let mean = |f: fn(&Footwork) -> f64| ok.iter().map(|w| f(w)).sum::<f64>() / n;
-    (!ok.is_empty()).then(|| Footwork {
-        stepping_m: mean(|w| w.stepping_m),
-        sliding_m: mean(|w| w.sliding_m),
-        lean_m: mean(|w| w.lean_m),
-        plants: (mean(|w| f64::from(w.plants))) as u32,
-    })
-}
-
-fn footwork_json(w: &Footwork) -> serde_json::Value {
-    serde_json::json!({
-        "stepping_m": w.stepping_m,
-        "sliding_m": w.sliding_m,
-        "lean_m": w.lean_m,
-        "plants": w.plants,
     })
 }
 

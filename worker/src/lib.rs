@@ -57,9 +57,17 @@ pub fn planned_x_m(req: &TrialRequest) -> Result<Option<f64>, TrialError> {
 
 /// Runs one trial: a pure function of the request.
 pub fn run_trial(req: &TrialRequest) -> Result<Measurement, TrialError> {
+    run_trial_with_footwork(req).map(|(m, _)| m)
+}
+
+/// [`run_trial`], with how the NAO's feet covered the distance
+/// ([`nao::footwork`]; none for the synthetic model).
+pub fn run_trial_with_footwork(
+    req: &TrialRequest,
+) -> Result<(Measurement, Option<nao::footwork::Footwork>), TrialError> {
     let params = params_of(req)?;
     match req.model {
-        TrialModel::Synthetic => Ok(synthetic::trial(&params, req.seed, req.duration_s)),
+        TrialModel::Synthetic => Ok((synthetic::trial(&params, req.seed, req.duration_s), None)),
         TrialModel::Nao => {
             let t = nao::trial::run(
                 req.robot_type,
@@ -70,7 +78,7 @@ pub fn run_trial(req: &TrialRequest) -> Result<Measurement, TrialError> {
                 nao::trial::Engine::of(req.walk),
             )
             .map_err(|e| TrialError::Model(e.to_string()))?;
-            Ok(t.measurement)
+            Ok((t.measurement, Some(t.footwork)))
         }
     }
 }

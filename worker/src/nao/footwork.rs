@@ -20,7 +20,7 @@ pub const PLANTED_N: f64 = 10.0;
 
 /// The torso's forward advance split by what the feet did, m. `stepping_m +
 /// sliding_m + lean_m` is the torso's advance along x over the trial.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
 pub struct Footwork {
     /// The feet's mean forward travel while not planted (swing, roll-over), m.
     pub stepping_m: f64,
@@ -31,6 +31,32 @@ pub struct Footwork {
     /// Times a foot came to be planted after it was not (a foot that
     /// bounces on landing counts again).
     pub plants: u32,
+}
+
+impl Footwork {
+    /// The mean split of `trials` (`plants` rounded down); none if empty.
+    #[must_use]
+    pub fn mean<'a>(trials: impl IntoIterator<Item = &'a Footwork>) -> Option<Footwork> {
+        let mut sum = Footwork::default();
+        let mut plants = 0u64;
+        let mut n = 0u32;
+        for w in trials {
+            sum.stepping_m += w.stepping_m;
+            sum.sliding_m += w.sliding_m;
+            sum.lean_m += w.lean_m;
+            plants += u64::from(w.plants);
+            n += 1;
+        }
+        (n > 0).then(|| {
+            let k = f64::from(n);
+            Footwork {
+                stepping_m: sum.stepping_m / k,
+                sliding_m: sum.sliding_m / k,
+                lean_m: sum.lean_m / k,
+                plants: u32::try_from(plants / u64::from(n)).unwrap_or(u32::MAX),
+            }
+        })
+    }
 }
 
 /// Folds a trial's cycles into its [`Footwork`].
