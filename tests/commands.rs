@@ -516,7 +516,8 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
 
 #[test]
 fn trial_records_a_replay_of_its_first_trial() {
-    let f = scratch("record").join("replay.jsonl");
+    let dir = scratch("record");
+    let f = dir.join("replay.jsonl");
     let out = succeed(
         naofarm()
             .args([
@@ -572,7 +573,8 @@ fn trial_records_a_replay_of_its_first_trial() {
     assert_eq!(out.status.code(), Some(2));
 
     // --render: the same trial as an animated SVG, 2 s at 12.5 frames/s.
-    let svg = scratch("render").join("walk.svg");
+    let dir = scratch("render");
+    let svg = dir.join("walk.svg");
     succeed(
         naofarm()
             .args(["trial", "--trials", "1", "--duration", "2", "--seed", "4"])

@@ -14,7 +14,7 @@ use std::{
 
 use coordinator::journal::{Journal, Record};
 
-use util::{bits, decided, events, naofarm, root, scratch, succeed, Proc};
+use util::{bits, decided, events, naofarm, root, scratch, succeed, Proc, Scratch};
 
 const TIMEOUT: Duration = Duration::from_secs(120);
 
@@ -188,7 +188,7 @@ fn worker_with(port: u16, slots: u32, pace_ms: u64, fault: Option<(&str, &str)>)
     if let Some((var, value)) = fault {
         cmd.env(var, value);
     }
-    Proc::spawn(&mut cmd, &std::env::temp_dir(), "worker")
+    Proc::spawn_logged(&mut cmd, "worker")
 }
 
 /// Log text without the terminal colours tracing may add.
@@ -273,8 +273,9 @@ fn signal(child: &Child, sig: &str) {
     assert!(ok.success());
 }
 
-/// Runs a whole farm run with `n` workers; returns the run directory.
-fn farm_run(name: &str, n: usize, iterations: u64) -> PathBuf {
+/// Runs a whole farm run with `n` workers; returns the scratch directory
+/// (the run lives while it is held) and the run directory in it.
+fn farm_run(name: &str, n: usize, iterations: u64) -> (Scratch, PathBuf) {
     let dir = scratch(name);
     let exp = experiment(&dir, iterations);
     let out = dir.join("run");
@@ -283,12 +284,12 @@ fn farm_run(name: &str, n: usize, iterations: u64) -> PathBuf {
     let status = c.wait_exit();
     kill_all(&mut ws);
     assert!(status.success(), "coordinator: {status}; {:?}", c.seen);
-    out
+    (dir, out)
 }
 
 #[test]
 fn three_workers_complete_a_run_with_every_trial_journaled_once() {
-    let out = farm_run("three", 3, 20);
+    let (_dir, out) = farm_run("three", 3, 20);
     let records = journal(&out);
     assert_every_trial_once(&records, 20);
     let workers: std::collections::BTreeSet<String> =
@@ -301,8 +302,8 @@ fn three_workers_complete_a_run_with_every_trial_journaled_once() {
 
 #[test]
 fn one_worker_and_three_workers_give_bit_identical_histories() {
-    let one = decided(&journal(&farm_run("det1", 1, 15)));
-    let three = decided(&journal(&farm_run("det3", 3, 15)));
+    let one = decided(&journal(&farm_run("det1", 1, 15).1));
+    let three = decided(&journal(&farm_run("det3", 3, 15).1));
     assert_eq!(one.len(), 15);
     assert_eq!(bits(&one), bits(&three));
 }
@@ -400,7 +401,7 @@ fn a_frozen_worker_is_replaced_and_its_late_outcomes_ignored() {
 
 #[test]
 fn a_killed_coordinator_resumes_to_the_same_history() {
-    let reference = decided(&journal(&farm_run("resume-ref", 2, 20)));
+    let reference = decided(&journal(&farm_run("resume-ref", 2, 20).1));
     let dir = scratch("resume");
     let exp = experiment(&dir, 20);
     let out = dir.join("run");

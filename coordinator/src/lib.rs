@@ -27,3 +27,5 @@ pub mod lock;
 pub mod run;
 pub mod schedule;
 pub mod service;
+#[cfg(test)]
+mod test_dir;

@@ -113,8 +113,7 @@ mod tests {
 
     #[test]
     fn a_second_holder_is_refused_with_the_first_ones_pid() {
-        let d = std::env::temp_dir().join(format!("naofarm-lock-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
+        let d = crate::test_dir::test_dir("lock");
         let a = RunLock::acquire(&d).unwrap();
         assert!(RunLock::is_held(&d));
         let e = RunLock::acquire(&d).unwrap_err().to_string();

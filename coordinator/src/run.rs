@@ -1064,10 +1064,8 @@ mod tests {
         worker::run_trial(req).unwrap()
     }
 
-    fn tmp(name: &str) -> std::path::PathBuf {
-        let d = std::env::temp_dir().join(format!("naofarm-run-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        d
+    fn tmp(name: &str) -> crate::test_dir::TestDir {
+        crate::test_dir::test_dir(&format!("run-{name}"))
     }
 
     fn bits(h: &[DecidedIteration]) -> Vec<u64> {

@@ -2,7 +2,10 @@
 //! a scratch directory, a command that must succeed.
 #![allow(dead_code, clippy::unwrap_used)]
 
-use std::{path::PathBuf, process::Command};
+use std::{
+    path::{Path, PathBuf},
+    process::Command,
+};
 
 /// The `naofarm` binary under test.
 pub fn naofarm() -> Command {
@@ -47,12 +50,49 @@ pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// A fresh scratch directory for one test.
-pub fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("naofarm-e2e-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh scratch directory for one test (`naofarm-e2e-NAME-…` in the
+/// system's temporary directory): removed when the test lets go of it, kept
+/// (and its path printed) when the test is failing.
+pub fn scratch(name: &str) -> Scratch {
+    let dir = tempfile::Builder::new()
+        .prefix(&format!("naofarm-e2e-{name}-"))
+        .tempdir()
+        .unwrap();
+    Scratch(dir)
+}
+
+/// A test's scratch directory; see [`scratch`].
+pub struct Scratch(tempfile::TempDir);
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        self.0.path()
+    }
+}
+
+impl AsRef<Path> for Scratch {
+    fn as_ref(&self) -> &Path {
+        self.0.path()
+    }
+}
+
+impl AsRef<std::ffi::OsStr> for Scratch {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        self.0.path().as_os_str()
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            self.0.disable_cleanup(true);
+            eprintln!(
+                "kept the failing test's directory {}",
+                self.0.path().display()
+            );
+        }
+    }
 }
 
 /// A child process that is killed when the test lets go of it (an assert
@@ -63,6 +103,9 @@ pub struct Proc {
     pub child: std::process::Child,
     name: String,
     stderr: PathBuf,
+    /// The stderr file when the process owns it ([`Proc::spawn_logged`]):
+    /// removed after the process.
+    _log: Option<tempfile::TempPath>,
 }
 
 impl Proc {
@@ -82,6 +125,25 @@ impl Proc {
             child,
             name: name.to_string(),
             stderr,
+            _log: None,
+        }
+    }
+
+    /// Starts `cmd` with stderr to a temporary file of its own, removed
+    /// when the process is (printed first if the test is failing).
+    pub fn spawn_logged(cmd: &mut Command, name: &str) -> Self {
+        let (file, path) = tempfile::Builder::new()
+            .prefix(&format!("naofarm-e2e-{name}-"))
+            .suffix(".stderr")
+            .tempfile()
+            .unwrap()
+            .into_parts();
+        let child = cmd.stderr(file).spawn().unwrap();
+        Self {
+            child,
+            name: name.to_string(),
+            stderr: path.to_path_buf(),
+            _log: Some(path),
         }
     }
 

@@ -31,14 +31,14 @@ fn outcome(i: u64) -> Record {
     }
 }
 
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("naofarm-journal-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
+use crate::test_dir::{test_dir, TestDir};
+
+fn tmp(name: &str) -> TestDir {
+    test_dir(&format!("journal-{name}"))
 }
 
 /// A journal of a header and `n` outcomes; returns its directory and bytes.
-fn journal(name: &str, n: u64) -> (PathBuf, Vec<u8>) {
+fn journal(name: &str, n: u64) -> (TestDir, Vec<u8>) {
     let d = tmp(name);
     let mut j = Journal::create(&d, &header()).unwrap();
     for i in 0..n {
