@@ -99,6 +99,18 @@ fn worker(dir: &Path, ep: &str, slots: u32, pace_ms: u64, extra: &[&str]) -> Pro
     )
 }
 
+/// A worker of 2 slots with `pki`'s worker certificate, a client of `ep`.
+fn tls_worker(dir: &Path, ep: &str, pki: &Path) -> Proc {
+    Proc::spawn(
+        naofarm()
+            .args(["worker", "--connect", ep, "--slots", "2", "--tls"])
+            .arg(pki)
+            .stdout(Stdio::null()),
+        dir,
+        "worker",
+    )
+}
+
 /// A worker with `slots` and one fault hook, `var`=`value`, logging warnings.
 fn faulty_worker(dir: &Path, ep: &str, slots: u32, var: &str, value: &str) -> Proc {
     Proc::spawn(
@@ -407,17 +419,7 @@ fn a_farm_over_mutual_tls_gives_the_local_history_and_refuses_strangers() {
     let runs = tls_statuses(&ep, &pki, 30);
     assert!(runs.iter().any(|r| r["run"] == "tls"), "{runs:?}");
     python_watcher_sees(&ep, &pki, "tls");
-    let tls_worker = |_| {
-        Proc::spawn(
-            naofarm()
-                .args(["worker", "--connect", &ep, "--slots", "2", "--tls"])
-                .arg(&pki)
-                .stdout(Stdio::null()),
-            &dir,
-            "worker",
-        )
-    };
-    let _ws: Vec<Proc> = (0..3).map(tls_worker).collect();
+    let _ws: Vec<Proc> = (0..3).map(|_| tls_worker(&dir, &ep, &pki)).collect();
     assert!(wait_exit(&mut c).success());
     assert_eq!(
         bits(&decided(&records(&out))),
@@ -994,17 +996,7 @@ fn a_tls_router_survives_workers_killed_mid_run() {
     let out = dir.join("run");
     let stdout = out.with_extension("stdout");
     let _c = coordinator_with(&dir, &exp, &out, &ep, &["--tls", pki.to_str().unwrap()]);
-    let worker = || {
-        Proc::spawn(
-            naofarm()
-                .args(["worker", "--connect", &ep, "--slots", "2", "--tls"])
-                .arg(&pki)
-                .stdout(Stdio::null()),
-            &dir,
-            "worker",
-        )
-    };
-    let mut ws: Vec<Proc> = (0..6).map(|_| worker()).collect();
+    let mut ws: Vec<Proc> = (0..6).map(|_| tls_worker(&dir, &ep, &pki)).collect();
     // Waits for the run to decide `more` iterations, the router alive.
     let mut decide = |more: usize, kills: usize| {
         let n = decided_so_far(&stdout) + more;
@@ -1022,7 +1014,7 @@ fn a_tls_router_survives_workers_killed_mid_run() {
         // Each kill while trials flow: after the run has decided more.
         decide(1, k);
         ws[k % 6].kill();
-        ws[k % 6] = worker();
+        ws[k % 6] = tls_worker(&dir, &ep, &pki);
     }
     decide(5, 100);
 }

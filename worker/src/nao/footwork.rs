@@ -6,15 +6,16 @@
 //!
 //! A foot is *planted* while the ground carries at least [`PLANTED_N`] of
 //! it, whatever its tilt: a foot rolling over its heel or toe moves its
-//! centre by about a millimetre (the sole's half-length times the roll
-//! squared), so what a planted foot's centre travels is its sliding. Read from
+//! centre by about a millimetre (the centre sits a centimetre above the
+//! sole's edge, so a roll of θ rad moves it by about θ cm), so what a
+//! planted foot's centre travels is its sliding. Read from
 //! the simulation's ground truth at the end of each 20 ms cycle; the terms
 //! sum to the torso's advance over the cycles read. Reads only: it must not
 //! change a trial's bits.
 
 use super::sim::{Perception, Sim};
 
-/// Vertical load above which a foot may count as planted, N (a fifth of the
+/// Vertical load from which a foot counts as planted, N (a fifth of the
 /// robot's weight).
 pub const PLANTED_N: f64 = 10.0;
 
