@@ -511,13 +511,10 @@ mod tests {
         let exp = experiment(include_str!(
             "../../../experiments/physical-technical-converged.toml"
         ));
-        let mut named = exp.full_params(&exp.expert_values());
-        for (n, v) in &mut named {
-            if n == "ThighRelHip2_Z" {
-                *v = -0.08;
-            }
-        }
-        let crouch = ParamValues::from_named(&named).unwrap();
+        let mut crouch = expert_of(&exp);
+        crouch
+            .set(protocol::params::Param::ThighRelHip2Z, -0.08)
+            .unwrap();
         let physics = SimSettings::with_physics(&exp.physics);
         let batch = Batch {
             seed0: 3,
