@@ -350,6 +350,23 @@ impl Experiment {
         Ok(e)
     }
 
+    /// A feedback gain (`hip_pitch_gain`, `ankle_pitch_gain`) needs a walk
+    /// with feedback: the open loop has none to give it to.
+    fn feedback_gain_has_feedback(&self, name: &str) -> Result<(), String> {
+        let gain = params::find(name).is_some_and(|k| {
+            matches!(
+                k.param,
+                params::Param::HipPitchGain | params::Param::AnklePitchGain
+            )
+        });
+        if gain && self.walk == WalkEngine::OpenLoop {
+            return Err(format!(
+                "`{name}` is a gain of the closed-loop walk's feedback, and walk = \"open-loop\" has none"
+            ));
+        }
+        Ok(())
+    }
+
     /// Checks every field; the first problem found is returned.
     pub fn validate(&self) -> Result<(), ExperimentError> {
         keys::check_chunk("run name", &self.name).map_err(|m| invalid("name", m))?;
@@ -414,9 +431,13 @@ impl Experiment {
             let engine_constant = params::find(&p.name).is_some_and(|k| {
                 matches!(
                     k.param,
-                    params::Param::StepPeriod | params::Param::DoubleSupport
+                    params::Param::StepPeriod
+                        | params::Param::DoubleSupport
+                        | params::Param::ComAboveHip
                 )
             });
+            self.feedback_gain_has_feedback(&p.name)
+                .map_err(|m| invalid(f("name"), m))?;
             if engine_constant && p.expert.is_none() && self.walk == WalkEngine::OpenLoop {
                 return Err(invalid(
                     f("expert"),
@@ -451,6 +472,8 @@ impl Experiment {
         for (name, v) in &self.fixed {
             let field = format!("fixed.{name}");
             params::check_value(name, *v).map_err(|m| invalid(&field, m))?;
+            self.feedback_gain_has_feedback(name)
+                .map_err(|m| invalid(&field, m))?;
             if self.parameter.iter().any(|p| &p.name == name) {
                 return Err(invalid(field, "is also an optimised [[parameter]]"));
             }
@@ -681,6 +704,8 @@ expert = -0.04
             "physical-technical.toml",
             "physical-converged.toml",
             "physical-technical-converged.toml",
+            "physical-technical-converged-period.toml",
+            "physical-technical-stiff.toml",
         ] {
             let path = format!("{}/../experiments/{f}", env!("CARGO_MANIFEST_DIR"));
             let text = std::fs::read_to_string(&path).unwrap();
@@ -688,6 +713,11 @@ expert = -0.04
             if f.ends_with("converged.toml") {
                 assert_eq!(e.physics.substeps, 10, "{f}");
                 assert_eq!(e.fixed.get("double_support"), Some(&0.0), "{f}");
+            }
+            if f.ends_with("stiff.toml") {
+                assert_eq!(e.physics.substeps, Physics::default().substeps, "{f}");
+                assert_eq!(e.physics.pgs_iterations, 32, "{f}");
+                assert_eq!(e.fixed.get("hip_pitch_gain"), Some(&-0.75), "{f}");
             }
         }
     }
@@ -720,5 +750,31 @@ expert = -0.04
         );
         let fixed = format!("{GOOD}\n[fixed]\nstep_period = nan\n");
         assert!(err(&fixed).contains("fixed.step_period"), "{}", err(&fixed));
+    }
+
+    /// The feedback's gains are parameters of the closed-loop walk; the open
+    /// loop, which has no feedback, refuses them by name, fixed or optimised.
+    #[test]
+    fn feedback_gains_are_closed_loop_parameters() {
+        let fixed = format!("{GOOD}\n[fixed]\nhip_pitch_gain = -0.75\nankle_pitch_gain = 0.3\n");
+        let e = Experiment::from_toml(&format!("walk = \"closed-loop\"\n{fixed}")).unwrap();
+        assert_eq!(e.fixed.get("hip_pitch_gain"), Some(&-0.75));
+        let msg = err(&format!("walk = \"open-loop\"\n{fixed}"));
+        assert!(
+            msg.contains("fixed.ankle_pitch_gain") && msg.contains("open-loop"),
+            "{msg}"
+        );
+        let gain = GOOD.replace("ThighRelHip2_Z", "hip_pitch_gain").replace(
+            "lower = -0.08\nupper = -0.03\nexpert = -0.04",
+            "lower = -2.0\nupper = 0.0\nexpert = -1.0",
+        );
+        Experiment::from_toml(&format!("walk = \"closed-loop\"\n{gain}")).unwrap();
+        let msg = err(&format!("walk = \"open-loop\"\n{gain}"));
+        assert!(
+            msg.contains("parameter[0].name") && msg.contains("hip_pitch_gain"),
+            "{msg}"
+        );
+        let far = format!("{GOOD}\n[fixed]\nhip_pitch_gain = 9.0\n");
+        assert!(err(&format!("walk = \"closed-loop\"\n{far}")).contains("fixed.hip_pitch_gain"));
     }
 }

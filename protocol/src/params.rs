@@ -44,6 +44,12 @@ pub enum Param {
     StepPeriod,
     /// `double_support`.
     DoubleSupport,
+    /// `com_above_hip`.
+    ComAboveHip,
+    /// `hip_pitch_gain`.
+    HipPitchGain,
+    /// `ankle_pitch_gain`.
+    AnklePitchGain,
 }
 
 impl Param {
@@ -195,6 +201,38 @@ pub const KNOWN: &[KnownParam] = &[
         unit: "1",
         default: 0.05,
         doc: "double-support share of a step; not given, the engine's own (closed loop 0.05, open loop 0.10)",
+    },
+    KnownParam {
+        param: Param::ComAboveHip,
+        name: "com_above_hip",
+        role: Role::Walk,
+        min: -0.05,
+        max: 0.15,
+        unit: "m",
+        default: 0.03,
+        doc: "the plan's centre of mass above the hip centre (the pendulum's height); not given, the engine's own (closed loop 0.03 m, open loop 0.03 m)",
+    },
+    // The closed-loop walk's feedback gains, as parameters (the open loop
+    // has no feedback: an experiment of it may not give them).
+    KnownParam {
+        param: Param::HipPitchGain,
+        name: "hip_pitch_gain",
+        role: Role::Walk,
+        min: -5.0,
+        max: 5.0,
+        unit: "rad/rad",
+        default: -1.5,
+        doc: "stance hip pitch per rad of sensed torso pitch; not given, the closed-loop engine's own (-1.5)",
+    },
+    KnownParam {
+        param: Param::AnklePitchGain,
+        name: "ankle_pitch_gain",
+        role: Role::Walk,
+        min: -5.0,
+        max: 5.0,
+        unit: "rad/rad",
+        default: 0.0,
+        doc: "stance ankle pitch per rad of sensed torso pitch; not given, the closed-loop engine's own (0)",
     },
 ];
 

@@ -18,8 +18,9 @@ use crate::{
 /// carry: 5 since `step_period` and `double_support` joined the parameter
 /// registry (a grant of a run that sets them is one a version-4 decoder
 /// refuses, so a version-4 worker must not take part; it is not told apart by
-/// its fingerprint, whose probe bits are unchanged).
-pub const WIRE_VERSION: u8 = 5;
+/// its fingerprint, whose probe bits are unchanged); 6 since `com_above_hip`,
+/// `hip_pitch_gain` and `ankle_pitch_gain` joined it, for the same reason.
+pub const WIRE_VERSION: u8 = 6;
 /// Largest message accepted, in bytes (checked before any allocation).
 pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
 const MAGIC: [u8; 2] = *b"NF";

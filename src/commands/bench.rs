@@ -397,6 +397,26 @@ fn measure_walk(
 /// `experiments/physical-technical-converged.toml`, whose physics and fixed
 /// values `bench sim` measures beside the default.
 const CONVERGED: &str = include_str!("../../experiments/physical-technical-converged.toml");
+/// `experiments/physical-technical-stiff.toml`: the farm's step with the
+/// contact problem solved further, measured beside the default too.
+const STIFF: &str = include_str!("../../experiments/physical-technical-stiff.toml");
+
+/// The walk of a shipped experiment file, as the file sets it (its physics
+/// and its fixed values, with its expert set), measured like the others.
+fn measure_file_walk(text: &str, what: &str, seconds: f64, label: &str) -> Result<Row, Failure> {
+    let bad = |e: String| Failure::Job(anyhow!("the {what} experiment file: {e}"));
+    let file = protocol::Experiment::from_toml(text).map_err(|e| bad(e.to_string()))?;
+    let params = ParamValues::from_named(&file.full_params(&file.expert_values()))
+        .map_err(|e| bad(e.to_string()))?;
+    let mut r = measure_walk(
+        SimSettings::with_physics(&file.physics),
+        seconds,
+        file.walk,
+        &params,
+    )?;
+    r.label = label.into();
+    Ok(r)
+}
 
 /// `naofarm bench sim`: real-time factor and physics steps per second on one core.
 pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
@@ -482,21 +502,20 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             rows.push(r);
         }
     }
-    // The converged experiments' walk, as their file sets it: its physics
-    // and its fixed values (no double support) with the expert set.
-    let file = protocol::Experiment::from_toml(CONVERGED)
-        .map_err(|e| Failure::Job(anyhow!("the converged experiment file: {e}")))?;
-    let converged_params = ParamValues::from_named(&file.full_params(&file.expert_values()))
-        .map_err(|e| Failure::Job(anyhow!("the converged experiment file: {e}")))?;
-    let mut r = measure_walk(
-        SimSettings::with_physics(&file.physics),
+    rows.push(measure_file_walk(
+        CONVERGED,
+        "converged",
         a.seconds,
-        file.walk,
-        &converged_params,
-    )?;
-    r.label = "converged files: 10x2ms, no double support".into();
-    rows.push(r);
+        "converged files: 10x2ms, no double support",
+    )?);
     let converged = rows.len() - 1;
+    rows.push(measure_file_walk(
+        STIFF,
+        "stiff",
+        a.seconds,
+        "stiff file: 2x10ms, pgs 32, its engine",
+    )?);
+    let stiff = rows.len() - 1;
     let rtf = |r: &Row| r.sim_s / r.wall_s;
     let sps = |r: &Row| r.sim_s / CYCLE_S * f64::from(r.settings.substeps) / r.wall_s;
     let headline = rows
@@ -512,6 +531,8 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
     let closed_share = rtf(closed) / rtf(headline);
     let converged = &rows[converged];
     let converged_share = rtf(converged) / rtf(headline);
+    let stiff = &rows[stiff];
+    let stiff_share = rtf(stiff) / rtf(headline);
     // What a physics step costs there against the default's: about the same,
     // so the converged walk's share follows its steps per cycle (docs/walk.md,
     // "Why no code speed-up meets the 80 % on converged physics").
@@ -526,6 +547,8 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             "converged_realtime_factor": rtf(converged),
             "converged_share_of_open_loop": converged_share,
             "converged_steps_per_second_share": converged_step_share,
+            "stiff_realtime_factor": rtf(stiff),
+            "stiff_share_of_open_loop": stiff_share,
             "rows": rows.iter().map(|r| serde_json::json!({
                 "settings": r.label,
                 "motion": r.motion,
@@ -573,6 +596,11 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             converged_step_share,
             converged.settings.substeps,
             closed.settings.substeps
+        );
+        outln!(
+            "closed-loop walk of the stiff experiment: {:.1}x real time, {:.0} % of the open loop's at the default",
+            rtf(stiff),
+            100.0 * stiff_share
         );
     }
     Ok(())

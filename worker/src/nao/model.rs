@@ -188,7 +188,10 @@ impl Morphology {
             | Param::HeightLift
             | Param::StepLength
             | Param::StepPeriod
-            | Param::DoubleSupport => None,
+            | Param::DoubleSupport
+            | Param::ComAboveHip
+            | Param::HipPitchGain
+            | Param::AnklePitchGain => None,
         }
     }
 

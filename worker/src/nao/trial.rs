@@ -299,7 +299,9 @@ pub fn run_observed(
     let model = NaoModel::with_params(robot_type, params)?;
     let walk: WalkParams = params.walk();
     let gait = Gait::with_config(&model, walk, duration_s, engine.gait.with_params(params));
-    let mut balance = engine.feedback.map(Balance::new);
+    let mut balance = engine
+        .feedback
+        .map(|gains| Balance::new(gains.with_params(params)));
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let rest = standing_angles(&model);
     let q0 = gait.targets(&rest, 0.0);

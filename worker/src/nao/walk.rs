@@ -142,9 +142,10 @@ impl GaitConfig {
         yaw_pitch_rad: 0.0,
     };
 
-    /// These constants with the parameter set's `step_period` and
-    /// `double_support`, where it gives them (the registry's walk-engine
-    /// parameters; an experiment may fix or optimise them).
+    /// These constants with the parameter set's `step_period`,
+    /// `double_support` and `com_above_hip`, where it gives them (the
+    /// registry's walk-engine parameters; an experiment may fix or optimise
+    /// them).
     #[must_use]
     pub fn with_params(self, params: &ParamValues) -> Self {
         Self {
@@ -152,6 +153,9 @@ impl GaitConfig {
             double_support: params
                 .given(Param::DoubleSupport)
                 .unwrap_or(self.double_support),
+            com_above_hip_m: params
+                .given(Param::ComAboveHip)
+                .unwrap_or(self.com_above_hip_m),
             ..self
         }
     }
