@@ -547,6 +547,35 @@ mod tests {
     use crate::nao::model::Morphology;
     use rand::{Rng, SeedableRng};
 
+    /// Forward kinematics of leg angles `q` (le1..le6) on `side` (0 left):
+    /// the ankle-roll anchor relative to that side's hip centre and the
+    /// foot's rotation, or None when an angle is past its joint's stops.
+    fn foot_of(
+        model: &NaoModel,
+        leg: &Leg,
+        side: usize,
+        q: &[f64; 6],
+    ) -> Option<([f64; 3], UnitQuaternion<f64>)> {
+        let pre = if side == 0 { "lle" } else { "rle" };
+        let mut angles = vec![0.0; model.joints.len()];
+        for (i, qi) in q.iter().enumerate() {
+            let j = model.joint_index(&format!("{pre}{}", i + 1)).unwrap();
+            let (lo, hi) = model.joints[j].limits_rad;
+            if !(lo..=hi).contains(qi) {
+                return None;
+            }
+            angles[j] = *qi;
+        }
+        let g = body_motions(model, &angles, &Iso::identity());
+        let six = &model.joints[model.joint_index(&format!("{pre}6")).unwrap()];
+        let at = moved(&g[six.child], six.anchor);
+        let y = if side == 0 { leg.hip[1] } else { -leg.hip[1] };
+        Some((
+            [at[0] - leg.hip[0], at[1] - y, at[2] - leg.hip[2]],
+            g[six.child].rotation,
+        ))
+    }
+
     /// Forward kinematics of the IK solution reaches the asked point with a
     /// flat foot, across the workspace and for several thighs.
     #[test]
@@ -569,31 +598,12 @@ mod tests {
                     -rng.random_range(0.55..0.97) * reach - PITCH_ABOVE_ROLL,
                 ];
                 let q = leg_ik(p, &leg);
-                let mut angles = vec![0.0; model.joints.len()];
-                let pre = if side == 0 { "lle" } else { "rle" };
-                let mut in_limits = true;
-                for (i, qi) in q.iter().enumerate() {
-                    let j = model.joint_index(&format!("{pre}{}", i + 1)).unwrap();
-                    let (lo, hi) = model.joints[j].limits_rad;
-                    in_limits &= *qi >= lo && *qi <= hi;
-                    angles[j] = *qi;
-                }
-                if !in_limits {
+                let Some((at, foot)) = foot_of(&model, &leg, side, &q) else {
                     continue;
-                }
-                let g = body_motions(&model, &angles, &Iso::identity());
-                let six = model.joint_index(&format!("{pre}6")).unwrap();
-                let anchor = model.joints[six].anchor;
-                let got = moved(&g[model.joints[six].child], anchor);
-                let y = if side == 0 { leg.hip[1] } else { -leg.hip[1] };
-                let hip = [leg.hip[0], y, leg.hip[2]];
+                };
                 for k in 0..3 {
-                    assert!(
-                        (got[k] - hip[k] - p[k]).abs() < 1e-6,
-                        "tz {tz} p {p:?} got {got:?}"
-                    );
+                    assert!((at[k] - p[k]).abs() < 1e-6, "tz {tz} p {p:?} got {at:?}");
                 }
-                let foot = g[model.joints[six].child].rotation;
                 assert!(foot.angle() < 1e-9, "foot not flat: {}", foot.angle());
                 checked += 1;
             }
@@ -620,30 +630,12 @@ mod tests {
                 -rng.random_range(0.6..0.95) * reach - PITCH_ABOVE_ROLL,
             ];
             let q = leg_ik_yawed(p, &leg, leg.yaw_pitch_axes[side], yp);
-            let pre = if side == 0 { "lle" } else { "rle" };
-            let mut angles = vec![0.0; model.joints.len()];
-            let mut in_limits = true;
-            for (i, qi) in q.iter().enumerate() {
-                let j = model.joint_index(&format!("{pre}{}", i + 1)).unwrap();
-                let (lo, hi) = model.joints[j].limits_rad;
-                in_limits &= *qi >= lo && *qi <= hi;
-                angles[j] = *qi;
-            }
-            if !in_limits {
+            let Some((at, foot)) = foot_of(&model, &leg, side, &q) else {
                 continue;
-            }
-            let g = body_motions(&model, &angles, &Iso::identity());
-            let six = model.joint_index(&format!("{pre}6")).unwrap();
-            let got = moved(&g[model.joints[six].child], model.joints[six].anchor);
-            let y = if side == 0 { leg.hip[1] } else { -leg.hip[1] };
-            let hip = [leg.hip[0], y, leg.hip[2]];
+            };
             for k in 0..3 {
-                assert!(
-                    (got[k] - hip[k] - p[k]).abs() < 1e-6,
-                    "yp {yp} p {p:?} got {got:?}"
-                );
+                assert!((at[k] - p[k]).abs() < 1e-6, "yp {yp} p {p:?} got {at:?}");
             }
-            let foot = g[model.joints[six].child].rotation;
             let up = foot * Vector3::z();
             assert!((up - Vector3::z()).norm() < 1e-9, "sole not level: {up:?}");
             let fwd = foot * Vector3::x();
