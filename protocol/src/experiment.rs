@@ -705,6 +705,7 @@ expert = -0.04
             "physical-converged.toml",
             "physical-technical-converged.toml",
             "physical-technical-converged-period.toml",
+            "physical-stiff.toml",
             "physical-technical-stiff.toml",
         ] {
             let path = format!("{}/../experiments/{f}", env!("CARGO_MANIFEST_DIR"));
