@@ -488,6 +488,16 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
         assert_eq!(out.status.code(), Some(2), "{bad}");
         assert!(!out.stderr.is_empty());
     }
+    // A feedback gain on the open loop, which has no feedback: refused by
+    // name rather than ignored.
+    let err = fails(
+        naofarm().args(["trial", "--trials", "1", "--param", "hip_pitch_gain=-1"]),
+        2,
+    );
+    assert!(
+        err.contains("hip_pitch_gain") && err.contains("open-loop"),
+        "{err}"
+    );
     let out = naofarm()
         .args(["trial", "--trials", "1", "--pgs-iterations", "500"])
         .output()

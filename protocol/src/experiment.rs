@@ -117,6 +117,24 @@ pub enum WalkEngine {
     ClosedLoop,
 }
 
+/// A feedback gain (`hip_pitch_gain`, `ankle_pitch_gain`) needs a walk with
+/// feedback: the open loop has none to give it to, so a parameter set for it
+/// that names one is refused (by an experiment file and by `naofarm trial`).
+pub fn gain_has_feedback(walk: WalkEngine, name: &str) -> Result<(), String> {
+    let gain = params::find(name).is_some_and(|k| {
+        matches!(
+            k.param,
+            params::Param::HipPitchGain | params::Param::AnklePitchGain
+        )
+    });
+    if gain && walk == WalkEngine::OpenLoop {
+        return Err(format!(
+            "`{name}` is a gain of the closed-loop walk's feedback, and the open-loop walk has none"
+        ));
+    }
+    Ok(())
+}
+
 impl WalkEngine {
     /// Every engine, by its name in experiment files.
     pub const ALL: [(&'static str, Self); 2] = [
@@ -350,21 +368,8 @@ impl Experiment {
         Ok(e)
     }
 
-    /// A feedback gain (`hip_pitch_gain`, `ankle_pitch_gain`) needs a walk
-    /// with feedback: the open loop has none to give it to.
     fn feedback_gain_has_feedback(&self, name: &str) -> Result<(), String> {
-        let gain = params::find(name).is_some_and(|k| {
-            matches!(
-                k.param,
-                params::Param::HipPitchGain | params::Param::AnklePitchGain
-            )
-        });
-        if gain && self.walk == WalkEngine::OpenLoop {
-            return Err(format!(
-                "`{name}` is a gain of the closed-loop walk's feedback, and walk = \"open-loop\" has none"
-            ));
-        }
-        Ok(())
+        gain_has_feedback(self.walk, name)
     }
 
     /// Checks every field; the first problem found is returned.

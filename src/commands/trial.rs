@@ -97,6 +97,10 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         (None, Some(e)) => e.walk,
         (None, None) => WalkEngine::OpenLoop,
     };
+    for (name, _) in &params {
+        protocol::experiment::gain_has_feedback(walk, name)
+            .map_err(|m| Failure::Usage(anyhow!("--param {m}")))?;
+    }
     let mut engine = trial::Engine::of(walk);
     for kv in &a.engine {
         let (k, v) = kv
