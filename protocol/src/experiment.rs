@@ -368,10 +368,6 @@ impl Experiment {
         Ok(e)
     }
 
-    fn feedback_gain_has_feedback(&self, name: &str) -> Result<(), String> {
-        gain_has_feedback(self.walk, name)
-    }
-
     /// Checks every field; the first problem found is returned.
     pub fn validate(&self) -> Result<(), ExperimentError> {
         keys::check_chunk("run name", &self.name).map_err(|m| invalid("name", m))?;
@@ -441,8 +437,7 @@ impl Experiment {
                         | params::Param::ComAboveHip
                 )
             });
-            self.feedback_gain_has_feedback(&p.name)
-                .map_err(|m| invalid(f("name"), m))?;
+            gain_has_feedback(self.walk, &p.name).map_err(|m| invalid(f("name"), m))?;
             if engine_constant && p.expert.is_none() && self.walk == WalkEngine::OpenLoop {
                 return Err(invalid(
                     f("expert"),
@@ -477,8 +472,7 @@ impl Experiment {
         for (name, v) in &self.fixed {
             let field = format!("fixed.{name}");
             params::check_value(name, *v).map_err(|m| invalid(&field, m))?;
-            self.feedback_gain_has_feedback(name)
-                .map_err(|m| invalid(&field, m))?;
+            gain_has_feedback(self.walk, name).map_err(|m| invalid(&field, m))?;
             if self.parameter.iter().any(|p| &p.name == name) {
                 return Err(invalid(field, "is also an optimised [[parameter]]"));
             }
