@@ -293,7 +293,7 @@ pub struct ClopBenchArgs {
     /// Algorithms, comma-separated (clop, cmaes, random).
     #[arg(long, default_value = "clop,cmaes,random", value_delimiter = ',')]
     pub algorithms: Vec<String>,
-    /// Also measure the cost of one tell+ask at n = 100, 1000, 5000 for d = 1 and 5.
+    /// Also measure the cost of one tell+ask at n = 100, 1000, 5000 for d = 1, 5 and 8.
     #[arg(long)]
     pub cost: bool,
     /// Machine-readable output.

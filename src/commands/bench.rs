@@ -90,7 +90,7 @@ fn clop(a: &ClopBenchArgs) -> Result<(), Failure> {
             "refresh",
             "µs per tell+ask"
         );
-        for d in [1, 5] {
+        for d in [1, 5, 8] {
             for rate in [0.1, 0.0] {
                 for r in bench::cost(d, &[100, 1000, 5000], rate, 20, a.seed) {
                     outln!(
