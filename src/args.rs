@@ -128,7 +128,8 @@ pub enum Command {
     Stand(StandArgs),
     /// Run n walking trials of one parameter set locally; print the Table IV row.
     Trial(TrialArgs),
-    /// Benchmarks: `bench clop` (regret and cost), `bench sim` (physics speed).
+    /// Benchmarks: `bench clop` (regret and cost), `bench sim` (physics speed), `bench farm`
+    /// (trials/s through real processes), `bench fleet` (one fleet, many runs).
     #[command(subcommand)]
     Bench(BenchCommand),
     /// Tune any noisy program locally with CLOP (an evaluator process or a script per game).
