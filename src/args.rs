@@ -458,6 +458,14 @@ pub struct TrialArgs {
     /// (default 0: the league's robot has none).
     #[arg(long)]
     pub armature: Option<f64>,
+    /// Natural frequency of the feet's ground contact, Hz, 10–10000
+    /// (default 500, or the experiment's).
+    #[arg(long)]
+    pub contact_hz: Option<f64>,
+    /// Joint stops that hold within a physics step (`[physics] firm_stops`):
+    /// `true` or `false` (default false, or the experiment's).
+    #[arg(long)]
+    pub firm_stops: Option<bool>,
     /// Record the first trial (seed --seed; with --run, the farm trial):
     /// every body's pose each 20 ms cycle, as JSON lines, for a replay.
     #[arg(long, value_name = "FILE")]
@@ -474,7 +482,7 @@ pub struct TrialArgs {
         value_name = "DIR",
         requires_all = ["iteration", "trial"],
         conflicts_with_all = ["params", "trials", "seed", "robot_type", "duration", "substeps",
-            "solver_iterations", "pgs_iterations", "armature"]
+            "solver_iterations", "pgs_iterations", "armature", "contact_hz", "firm_stops"]
     )]
     pub run_dir: Option<std::path::PathBuf>,
     /// With --run: the iteration.

@@ -407,6 +407,8 @@ fn a_nao_report_has_an_animated_replay_of_expert_optim1_and_optim2() {
             ("--solver-iterations", "solver_iterations"),
             ("--pgs-iterations", "pgs_iterations"),
             ("--armature", "armature_kg_m2"),
+            ("--contact-hz", "contact_hz"),
+            ("--firm-stops", "firm_stops"),
         ] {
             trial.arg(flag).arg(physics[key].to_string());
         }

@@ -254,6 +254,17 @@ pub struct Physics {
     /// Reflected rotor inertia added to every motorised hinge, kg·m² (0..=0.1;
     /// MuJoCo's `armature`). The league's robot has none (0, the default).
     pub armature_kg_m2: f64,
+    /// Natural frequency of the feet's contact with the ground, Hz (10..=10000;
+    /// damping ratio 10). The default 500 is stiffer than rapier's own 60 Hz
+    /// for contacts with a fixed body; `firm_stops` walks on the softer one.
+    pub contact_hz: f64,
+    /// Joint stops that hold within a physics step (the patch of the
+    /// vendored rapier3d, `vendor/rapier3d/NAOFARM.md`): a joint within 3° of a
+    /// stop gets a speculative limit row, which lets it reach the stop within
+    /// the step and no further, and the limit rows are solved again after the
+    /// contacts, so that a landing cannot push a joint through its stop.
+    /// Off (the default): rapier's stops, engaged only past the stop.
+    pub firm_stops: bool,
 }
 
 impl std::fmt::Display for Physics {
@@ -267,7 +278,15 @@ impl std::fmt::Display for Physics {
             self.solver_iterations,
             self.pgs_iterations,
             self.armature_kg_m2
-        )
+        )?;
+        // The two later keys only when set, so a default run reads as before.
+        if self.contact_hz != Self::default().contact_hz {
+            write!(f, ", ground contact {} Hz", self.contact_hz)?;
+        }
+        if self.firm_stops {
+            write!(f, ", firm stops")?;
+        }
+        Ok(())
     }
 }
 
@@ -278,6 +297,8 @@ impl Default for Physics {
             solver_iterations: 1,
             pgs_iterations: 12,
             armature_kg_m2: 0.0,
+            contact_hz: 500.0,
+            firm_stops: false,
         }
     }
 }
@@ -297,6 +318,10 @@ impl Physics {
         let a = self.armature_kg_m2;
         if !(a.is_finite() && (0.0..=0.1).contains(&a)) {
             return Err(("armature_kg_m2", format!("{a} is not in [0, 0.1]")));
+        }
+        let c = self.contact_hz;
+        if !(c.is_finite() && (10.0..=10_000.0).contains(&c)) {
+            return Err(("contact_hz", format!("{c} is not in [10, 10000]")));
         }
         Ok(())
     }
@@ -681,6 +706,21 @@ expert = -0.04
                 "iterations = 5\n[physics]\narmature_kg_m2 = nan",
                 "physics.armature_kg_m2",
             ),
+            (
+                "iterations = 5",
+                "iterations = 5\n[physics]\ncontact_hz = 5.0",
+                "physics.contact_hz",
+            ),
+            (
+                "iterations = 5",
+                "iterations = 5\n[physics]\ncontact_hz = inf",
+                "physics.contact_hz",
+            ),
+            (
+                "iterations = 5",
+                "iterations = 5\n[physics]\nfirm_stops = 1",
+                "firm_stops",
+            ),
         ];
         for (from, to, needle) in cases {
             let text = GOOD.replacen(from, to, 1);
@@ -706,6 +746,7 @@ expert = -0.04
             "physical-technical-converged-period.toml",
             "physical-stiff.toml",
             "physical-technical-stiff.toml",
+            "physical-technical-firm.toml",
         ] {
             let path = format!("{}/../experiments/{f}", env!("CARGO_MANIFEST_DIR"));
             let text = std::fs::read_to_string(&path).unwrap();
@@ -718,6 +759,17 @@ expert = -0.04
                 assert_eq!(e.physics.substeps, Physics::default().substeps, "{f}");
                 assert_eq!(e.physics.pgs_iterations, 32, "{f}");
                 assert_eq!(e.fixed.get("hip_pitch_gain"), Some(&-0.75), "{f}");
+            }
+            if f.ends_with("firm.toml") {
+                assert_eq!(e.physics.substeps, Physics::default().substeps, "{f}");
+                assert!(e.physics.firm_stops && e.physics.contact_hz == 60.0, "{f}");
+                assert!(e
+                    .physics
+                    .to_string()
+                    .ends_with("ground contact 60 Hz, firm stops"));
+            } else {
+                assert!(!e.physics.firm_stops, "{f}");
+                assert_eq!(e.physics.contact_hz, Physics::default().contact_hz, "{f}");
             }
         }
     }

@@ -19,8 +19,10 @@ use crate::{
 /// registry (a grant of a run that sets them is one a version-4 decoder
 /// refuses, so a version-4 worker must not take part; it is not told apart by
 /// its fingerprint, whose probe bits are unchanged); 6 since `com_above_hip`,
-/// `hip_pitch_gain` and `ankle_pitch_gain` joined it, for the same reason.
-pub const WIRE_VERSION: u8 = 6;
+/// `hip_pitch_gain` and `ankle_pitch_gain` joined it, for the same reason; 7
+/// since a trial request's physics carries `contact_hz` and `firm_stops` (its
+/// body grew two fields, which a version-6 decoder reads as a malformed body).
+pub const WIRE_VERSION: u8 = 7;
 /// Largest message accepted, in bytes (checked before any allocation).
 pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
 const MAGIC: [u8; 2] = *b"NF";
@@ -828,9 +830,9 @@ mod tests {
         #[test]
         fn trial_request_round_trips(run in run(), i in any::<u64>(), k in any::<u32>(), seed in any::<u64>(),
                                      d in 0.1f64..100.0, ps in params(), t in 0u8..5, disp in any::<u64>(),
-                                     sub in 1u32..=50, its in 1u32..=16, pgs in 1u32..=200, arm in 0.0f64..0.1,
+                                     sub in 1u32..=50, its in 1u32..=16, pgs in 1u32..=200, arm in 0.0f64..0.1, hz in 10.0f64..10_000.0, firm in any::<bool>(),
                                      closed in any::<bool>()) {
-            let physics = Physics { substeps: sub, solver_iterations: its, pgs_iterations: pgs, armature_kg_m2: arm };
+            let physics = Physics { substeps: sub, solver_iterations: its, pgs_iterations: pgs, armature_kg_m2: arm, contact_hz: hz, firm_stops: firm };
             let m = TrialRequest { run, iteration: i, trial: k, seed, model: TrialModel::Synthetic,
                                    robot_type: t, duration_s: d, params: ps, dispatch: disp, physics,
                                    walk: if closed { WalkEngine::ClosedLoop } else { WalkEngine::OpenLoop } };

@@ -400,6 +400,9 @@ const CONVERGED: &str = include_str!("../../experiments/physical-technical-conve
 /// `experiments/physical-technical-stiff.toml`: the farm's step with the
 /// contact problem solved further, measured beside the default too.
 const STIFF: &str = include_str!("../../experiments/physical-technical-stiff.toml");
+/// `experiments/physical-technical-firm.toml`: the farm's step with stops
+/// that hold within it, measured beside the default too.
+const FIRM: &str = include_str!("../../experiments/physical-technical-firm.toml");
 
 /// The walk of a shipped experiment file, as the file sets it (its physics
 /// and its fixed values, with its expert set), measured like the others.
@@ -516,6 +519,13 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
         "stiff file: 2x10ms, pgs 32, its engine",
     )?);
     let stiff = rows.len() - 1;
+    rows.push(measure_file_walk(
+        FIRM,
+        "firm",
+        a.seconds,
+        "firm file: 2x10ms, pgs 28, firm stops, 60Hz",
+    )?);
+    let firm = rows.len() - 1;
     let rtf = |r: &Row| r.sim_s / r.wall_s;
     let sps = |r: &Row| r.sim_s / CYCLE_S * f64::from(r.settings.substeps) / r.wall_s;
     let headline = rows
@@ -533,6 +543,8 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
     let converged_share = rtf(converged) / rtf(headline);
     let stiff = &rows[stiff];
     let stiff_share = rtf(stiff) / rtf(headline);
+    let firm = &rows[firm];
+    let firm_share = rtf(firm) / rtf(headline);
     // What a physics step costs there against the default's: about the same,
     // so the converged walk's share follows its steps per cycle (docs/walk.md,
     // "Why no code speed-up meets the 80 % on converged physics").
@@ -549,6 +561,8 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             "converged_steps_per_second_share": converged_step_share,
             "stiff_realtime_factor": rtf(stiff),
             "stiff_share_of_open_loop": stiff_share,
+            "firm_realtime_factor": rtf(firm),
+            "firm_share_of_open_loop": firm_share,
             "rows": rows.iter().map(|r| serde_json::json!({
                 "settings": r.label,
                 "motion": r.motion,
@@ -601,6 +615,11 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             "closed-loop walk of the stiff experiment: {:.1}x real time, {:.0} % of the open loop's at the default",
             rtf(stiff),
             100.0 * stiff_share
+        );
+        outln!(
+            "closed-loop walk of the firm experiment: {:.1}x real time, {:.0} % of the open loop's at the default",
+            rtf(firm),
+            100.0 * firm_share
         );
     }
     Ok(())

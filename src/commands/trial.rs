@@ -83,6 +83,8 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         solver_iterations: a.solver_iterations.unwrap_or(d.solver_iterations),
         pgs_iterations: a.pgs_iterations.unwrap_or(d.pgs_iterations),
         armature_kg_m2: a.armature.unwrap_or(d.armature_kg_m2),
+        contact_hz: a.contact_hz.unwrap_or(d.contact_hz),
+        firm_stops: a.firm_stops.unwrap_or(d.firm_stops),
     };
     physics.validate().map_err(|(field, m)| {
         let flag = field.trim_end_matches("_kg_m2").replace('_', "-");

@@ -35,6 +35,14 @@ pub const SANE_SPIN_RAD_S: f64 = 500.0;
 /// SimSpark's drag coefficient (force per velocity, torque per angular velocity).
 pub const DRAG: f64 = 0.01;
 const GRAVITY: f64 = 9.81;
+/// With firm stops, a hinge this near a stop gets a speculative limit row
+/// (docs/walk.md, "Firm stops": 1° and 3° hold L alike; 3° keeps a fast
+/// joint's row in place a step ahead).
+pub const FIRM_STOP_WINDOW_DEG: f64 = 3.0;
+/// With firm stops, limit rows are solved again after the contacts once a
+/// joint is past this (negative: before the stop, so the speculative rows
+/// are solved again too).
+const FIRM_STOP_RESOLVE_PAST_DEG: f64 = -0.5;
 
 /// Physics settings of one simulation.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -47,7 +55,8 @@ pub struct SimSettings {
     pub pgs_iterations: usize,
     /// Coulomb friction of feet and ground.
     pub friction: f64,
-    /// Contact spring natural frequency, Hz (damping ratio 10).
+    /// Contact spring natural frequency, Hz (damping ratio 10; the
+    /// experiment's `[physics] contact_hz`).
     pub contact_hz: f64,
     /// How near the ground a collider gets contact rows before it touches
     /// (rapier's speculative contacts), m.
@@ -68,6 +77,11 @@ pub struct SimSettings {
     /// instead of only to joints past a stop: kept to check in tests that
     /// leaving the idle rows out changes no bit.
     pub every_limit_row: bool,
+    /// Stops that hold within a step (`protocol::Physics::firm_stops`): a
+    /// speculative limit row for every hinge within [`FIRM_STOP_WINDOW_DEG`] of
+    /// a stop, and the limit rows solved again after the contacts (the vendored
+    /// rapier3d's `speculative_joint_limits` and `joint_limits_after_contacts`).
+    pub firm_stops: bool,
     /// Every joint's speed cap times this (1: the league's robot): kept to
     /// measure which limit stops a walk (`naofarm trial --limit`), not for trials.
     pub speed_cap_scale: f64,
@@ -92,7 +106,7 @@ impl Default for SimSettings {
             solver_iterations: physics.solver_iterations as usize,
             pgs_iterations: physics.pgs_iterations as usize,
             friction: 1.0,
-            contact_hz: 500.0,
+            contact_hz: physics.contact_hz,
             contact_prediction_m: 0.005,
             weld_upper_body: true,
             motor_damping: 1000.0,
@@ -100,6 +114,7 @@ impl Default for SimSettings {
             armature_kg_m2: physics.armature_kg_m2,
             impulse_joints: false,
             every_limit_row: false,
+            firm_stops: physics.firm_stops,
             speed_cap_scale: 1.0,
             speed_cap_joints: 0,
             max_torque_nm: MAX_TORQUE_NM,
@@ -117,6 +132,8 @@ impl SimSettings {
             solver_iterations: physics.solver_iterations as usize,
             pgs_iterations: physics.pgs_iterations as usize,
             armature_kg_m2: physics.armature_kg_m2,
+            contact_hz: physics.contact_hz,
+            firm_stops: physics.firm_stops,
             ..Self::default()
         }
     }
@@ -335,6 +352,12 @@ impl Sim {
         world.integration_parameters.normalized_prediction_distance =
             settings.contact_prediction_m as f32;
         world.integration_parameters.static_contact_softness = contact;
+        world.integration_parameters.speculative_joint_limits = settings.firm_stops;
+        world.integration_parameters.joint_limits_after_contacts = if settings.firm_stops {
+            FIRM_STOP_RESOLVE_PAST_DEG.to_radians() as f32
+        } else {
+            f32::MAX
+        };
 
         let robot =
             InteractionGroups::new(Group::GROUP_1, Group::GROUP_2, InteractionTestMode::And);
@@ -697,6 +720,11 @@ impl Sim {
     fn set_motors_and_stops(&mut self, commands: &[f64], damping: f32) {
         let inv_dt = self.world.integration_parameters.inv_dt();
         let every_limit_row = self.settings.every_limit_row;
+        let window = if self.settings.firm_stops {
+            FIRM_STOP_WINDOW_DEG.to_radians() as f32
+        } else {
+            0.0
+        };
         let Some((mb, _)) = self.world.multibody_joints.get_mut(self.root_joint) else {
             return;
         };
@@ -709,7 +737,7 @@ impl Sim {
             let q = l.joint.coords()[3];
             let (lo, hi) = (joint.limits_rad.0 as f32, joint.limits_rad.1 as f32);
             let data = &mut l.joint.data;
-            if every_limit_row || q < lo || hi < q {
+            if every_limit_row || q < lo + window || hi - window < q {
                 data.set_limits(JointAxis::AngX, [lo, hi]);
             } else {
                 data.limit_axes.remove(JointAxesMask::ANG_X);
