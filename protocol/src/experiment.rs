@@ -745,6 +745,7 @@ expert = -0.04
             "physical-technical-converged.toml",
             "physical-technical-converged-period.toml",
             "physical-stiff.toml",
+            "physical-firm.toml",
             "physical-technical-stiff.toml",
             "physical-technical-firm.toml",
         ] {
