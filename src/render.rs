@@ -119,7 +119,7 @@ pub fn trial_svg(what: &Replayed<'_>, title: &str) -> anyhow::Result<String> {
         what.duration_s,
         what.settings,
         what.engine,
-        &mut |sim, _| {
+        &mut |sim, _, _| {
             if cycle % EVERY == 0 {
                 frames.push(
                     sim.body_poses()

@@ -554,6 +554,17 @@ fn trial_records_a_replay_of_its_first_trial() {
     assert_eq!(bodies, 23, "type 0 has 23 bodies");
     // One line per 20 ms cycle of the 1 s trial, every body's pose in each.
     assert_eq!(lines.len(), 1 + 50);
+    let joints: Vec<&str> = lines[0]["joints"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|j| j.as_str().unwrap())
+        .collect();
+    assert!(
+        joints.contains(&"lle3") && joints.contains(&"rle4"),
+        "{joints:?}"
+    );
+    let knee = joints.iter().position(|j| *j == "lle4").unwrap();
     for l in &lines[1..] {
         let poses = l["poses"].as_array().unwrap();
         assert_eq!(poses.len(), bodies);
@@ -561,7 +572,31 @@ fn trial_records_a_replay_of_its_first_trial() {
             .iter()
             .flat_map(|p| p.as_array().unwrap())
             .all(|x| x.as_f64().unwrap().is_finite()));
+        // Each joint's angle beside its target, and both feet's loads.
+        let angles = l["angles"].as_array().unwrap();
+        let targets = l["targets"].as_array().unwrap();
+        assert_eq!((angles.len(), targets.len()), (joints.len(), joints.len()));
+        let (a, t) = (
+            angles[knee].as_f64().unwrap(),
+            targets[knee].as_f64().unwrap(),
+        );
+        assert!(
+            (a - t).abs() < 0.5,
+            "the left knee at {a} rad, steered to {t}"
+        );
+        assert_eq!(l["load"].as_array().unwrap().len(), 2);
     }
+    // The robot stands on its feet: once it has settled, their loads carry
+    // its weight (4.607 kg, 45.2 N) on average.
+    let carried: f64 = lines[10..26]
+        .iter()
+        .map(|l| l["load"][0].as_f64().unwrap() + l["load"][1].as_f64().unwrap())
+        .sum::<f64>()
+        / 16.0;
+    assert!(
+        (carried / 45.2 - 1.0).abs() < 0.2,
+        "the feet carry {carried} N"
+    );
     // The recorded trial is the first of the row: same end of the torso.
     let last = &lines[50]["poses"][0];
     let first = &lines[1]["poses"][0];

@@ -378,7 +378,7 @@ fn measure_walk(
         seconds,
         settings,
         trial::Engine::of(walk),
-        &mut |_, _| {},
+        &mut |_, _, _| {},
     )
     .map_err(|e| Failure::Job(e.into()))?;
     Ok(Row {

@@ -1,8 +1,13 @@
 //! The replay file of one NAO trial, for watching a walk: JSON lines, first a
 //! header (`robot_type`, `seed`, `params` as name → value, `cycle_s`, and
-//! `bodies` with `name` and `shape`), then one line per 20 ms cycle with `t`
-//! and `poses`, each body's centre as `[x, y, z, qx, qy, qz, qw]` (world
-//! frame: x forward, y left, z up; m).
+//! `bodies` with `name` and `shape`, `joints` with the model's joint names),
+//! then one line per 20 ms cycle with `t`; `poses`, each body's centre as
+//! `[x, y, z, qx, qy, qz, qw]` (world frame: x forward, y left, z up; m);
+//! `angles`, each joint's angle at the cycle's end, and `targets`, the angle
+//! the cycle's servo commands steered it to (both rad, in `joints` order; the
+//! angles are the simulation's, without the sensors' noise); and `load`, the
+//! ground's vertical force on the left and right foot (N). `scripts/tracking.py`
+//! reads the last three: how the joints track, and where the steps land.
 
 use std::io::Write;
 
@@ -72,6 +77,7 @@ pub fn write(out: &mut dyn Write, what: &Replayed<'_>) -> Result<NaoTrial, Repla
         "params": named,
         "cycle_s": CYCLE_S,
         "bodies": bodies,
+        "joints": model.joints.iter().map(|j| j.name.as_str()).collect::<Vec<_>>(),
     });
     writeln!(out, "{header}")?;
     let mut io = Ok(());
@@ -82,9 +88,15 @@ pub fn write(out: &mut dyn Write, what: &Replayed<'_>) -> Result<NaoTrial, Repla
         duration_s,
         settings,
         engine,
-        &mut |sim, p| {
+        &mut |sim, p, targets| {
             if io.is_ok() {
-                let line = serde_json::json!({"t": p.time_s, "poses": sim.body_poses()});
+                let line = serde_json::json!({
+                    "t": p.time_s,
+                    "poses": sim.body_poses(),
+                    "angles": p.joint_angles_rad,
+                    "targets": targets,
+                    "load": [p.foot_force_n[0][2], p.foot_force_n[1][2]],
+                });
                 io = writeln!(out, "{line}");
             }
         },

@@ -281,12 +281,15 @@ pub fn run(
         duration_s,
         settings,
         engine,
-        &mut |_, _| {},
+        &mut |_, _, _| {},
     )
 }
 
-/// [`run`], calling `observe` after every cycle (to record every body's pose
-/// with [`Sim::body_poses`] for a replay, or to check the robot).
+/// [`run`], calling `observe` after every cycle with the simulation, what it
+/// perceives and the joint targets the cycle's commands steered to (model
+/// order: the plan's, with the balance correction on the closed loop), to
+/// record every body's pose with [`Sim::body_poses`] for a replay, to trace
+/// how the joints track, or to check the robot.
 pub fn run_observed(
     robot_type: u8,
     params: &ParamValues,
@@ -294,7 +297,7 @@ pub fn run_observed(
     duration_s: f64,
     mut settings: SimSettings,
     engine: Engine,
-    observe: &mut dyn FnMut(&Sim, &Perception),
+    observe: &mut dyn FnMut(&Sim, &Perception, &[f64]),
 ) -> Result<NaoTrial, NaoTrialError> {
     let model = NaoModel::with_params(robot_type, params)?;
     let walk: WalkParams = params.walk();
@@ -371,10 +374,10 @@ pub fn run_observed(
             }
             Err(e) => return Err(e.into()),
         };
-        q_now = q_next;
         overruns.fold(&model, &perception.joint_angles_rad, perception.time_s);
         footwork.fold(&sim, &perception);
-        observe(&sim, &perception);
+        observe(&sim, &perception, aim.as_deref().unwrap_or(&q_next));
+        q_now = q_next;
         if fallen(&perception) {
             fall_time_s = Some(perception.time_s);
             break;
@@ -606,7 +609,7 @@ mod tests {
             10.0,
             SimSettings::default(),
             OPEN,
-            &mut |_, p| {
+            &mut |_, p, _| {
                 cycles += 1;
                 for (j, a) in model.joints.iter().zip(&p.joint_angles_rad) {
                     assert!(
