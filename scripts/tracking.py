@@ -7,7 +7,8 @@ Reads replay files written by `naofarm trial --record FILE` (their `angles`,
 left leg: the mean and rms of angle minus target and the range of each,
 over the cycles after --skip seconds; then the steps: the foot-to-foot
 distance along x at each landing (a foot's vertical load rising through
-10 N, `footwork::PLANTED_N`, after the other foot's landing), their median,
+the header's `planted_n`, footwork's PLANTED_N, after the other foot's
+landing), their median,
 and the torso's advance.
 
     naofarm trial --experiment experiments/physical-technical.toml \\
@@ -18,9 +19,6 @@ import argparse
 import json
 import math
 import statistics
-
-PLANTED_N = 10.0
-
 
 def read(path):
     with open(path) as f:
@@ -51,7 +49,7 @@ def steps(head, rows):
     was = [True, True]
     for r in rows:
         for side in (0, 1):
-            now = r["load"][side] >= PLANTED_N
+            now = r["load"][side] >= head["planted_n"]
             if now and not was[side]:
                 landings.append((side, r["poses"][feet[side]][0]))
             was[side] = now

@@ -565,6 +565,7 @@ fn trial_records_a_replay_of_its_first_trial() {
         "{joints:?}"
     );
     let knee = joints.iter().position(|j| *j == "lle4").unwrap();
+    assert_eq!(lines[0]["planted_n"], 10.0, "footwork's PLANTED_N");
     for l in &lines[1..] {
         let poses = l["poses"].as_array().unwrap();
         assert_eq!(poses.len(), bodies);

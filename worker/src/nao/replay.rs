@@ -1,6 +1,8 @@
 //! The replay file of one NAO trial, for watching a walk: JSON lines, first a
 //! header (`robot_type`, `seed`, `params` as name → value, `cycle_s`, and
-//! `bodies` with `name` and `shape`, `joints` with the model's joint names),
+//! `bodies` with `name` and `shape`, `joints` with the model's joint names,
+//! `planted_n`, the load from which a foot counts as planted,
+//! [`super::footwork::PLANTED_N`]),
 //! then one line per 20 ms cycle with `t`; `poses`, each body's centre as
 //! `[x, y, z, qx, qy, qz, qw]` (world frame: x forward, y left, z up; m);
 //! `angles`, each joint's angle at the cycle's end, and `targets`, the angle
@@ -78,6 +80,7 @@ pub fn write(out: &mut dyn Write, what: &Replayed<'_>) -> Result<NaoTrial, Repla
         "cycle_s": CYCLE_S,
         "bodies": bodies,
         "joints": model.joints.iter().map(|j| j.name.as_str()).collect::<Vec<_>>(),
+        "planted_n": super::footwork::PLANTED_N,
     });
     writeln!(out, "{header}")?;
     let mut io = Ok(());
