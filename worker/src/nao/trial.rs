@@ -81,6 +81,7 @@ impl Engine {
             "lift_peak" => g.lift_peak = num()?.clamp(0.05, 0.95),
             "lift_end" => g.lift_end = num()?.clamp(0.1, 1.0),
             "yaw_pitch_rad" => g.yaw_pitch_rad = num()?.clamp(-0.5, 0.0),
+            "arm_swing_rad" => g.arm_swing_rad = num()?.clamp(-1.0, 1.0),
             "travel" => {
                 g.travel = match value {
                     "cosine" => super::walk::TravelProfile::Cosine,
@@ -302,6 +303,10 @@ pub fn run_observed(
     let model = NaoModel::with_params(robot_type, params)?;
     let walk: WalkParams = params.walk();
     let gait = Gait::with_config(&model, walk, duration_s, engine.gait.with_params(params));
+    if engine.gait.arm_swing_rad != 0.0 {
+        // Swinging arms must move: not welded to the torso.
+        settings.weld_upper_body = false;
+    }
     let mut balance = engine
         .feedback
         .map(|gains| Balance::new(gains.with_params(params)));

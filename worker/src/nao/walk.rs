@@ -88,6 +88,14 @@ pub struct GaitConfig {
     /// [`leg_ik`]). A measuring lever (`--engine yaw_pitch_rad`, ≤ 0: away
     /// from the +1° stop the stance leg rests on).
     pub yaw_pitch_rad: f64,
+    /// Arm swing: each shoulder pitch (`lae1`, `rae1`) turns this far from
+    /// its rest angle per step length the opposite foot leads, rad (the
+    /// right arm forward as the left foot is, as people walk); 0: arms at
+    /// rest, and welded to the torso in a trial. A measuring lever
+    /// (`--engine arm_swing_rad`): the arms' swing carries angular momentum
+    /// about the vertical against the legs' (docs/walk.md, "The torso's
+    /// yaw").
+    pub arm_swing_rad: f64,
 }
 
 /// How the swing foot travels forward over single support (s in 0..1, as a
@@ -140,6 +148,7 @@ impl GaitConfig {
         lift_peak: 0.5,
         lift_end: 1.0,
         yaw_pitch_rad: 0.0,
+        arm_swing_rad: 0.0,
     };
 
     /// These constants with the parameter set's `step_period`,
@@ -297,6 +306,8 @@ pub struct Gait {
     leg_slots: Vec<Option<(usize, usize)>>,
     /// Each joint's stops (model order): targets are clamped into them.
     limits: Vec<(f64, f64)>,
+    /// The left and right shoulder pitch (`lae1`, `rae1`), if the model has them.
+    shoulders: [Option<usize>; 2],
 }
 
 /// Which IK output drives each model joint: `lle1`..`lle6` → (0, 0..6),
@@ -355,6 +366,7 @@ impl Gait {
             com: Vec::new(),
             leg_slots: leg_slots(model),
             limits: model.joints.iter().map(|j| j.limits_rad).collect(),
+            shoulders: [model.joint_index("lae1"), model.joint_index("rae1")],
         };
         g.plan_com(duration_s, tc);
         g
@@ -514,6 +526,17 @@ impl Gait {
     pub fn targets(&self, rest: &[f64], t: f64) -> Vec<f64> {
         let legs = self.leg_targets(t);
         let mut q = rest.to_vec();
+        if self.cfg.arm_swing_rad != 0.0 {
+            // How far the left foot leads the right, in step lengths.
+            let feet = self.state(t).feet;
+            let lead = ((feet[0][0] - feet[1][0]) / self.p.step_length.max(1e-3)).clamp(-1.5, 1.5);
+            for (side, joint) in self.shoulders.iter().enumerate() {
+                let sign = if side == 0 { -1.0 } else { 1.0 };
+                if let Some(qj) = joint.and_then(|j| q.get_mut(j)) {
+                    *qj += sign * self.cfg.arm_swing_rad * lead;
+                }
+            }
+        }
         for ((qj, slot), (lo, hi)) in q.iter_mut().zip(&self.leg_slots).zip(&self.limits) {
             if let Some((side, i)) = slot {
                 *qj = legs[*side][*i];
@@ -710,6 +733,41 @@ mod tests {
         let k = START_S + 3.0 * 0.22;
         assert!(at(k).iter().all(|v| v.is_finite()));
         assert_eq!(at(k + 1e-9), at(k + 0.1));
+    }
+
+    /// Arm swing turns each shoulder pitch against its opposite leg, by the
+    /// constant times the left foot's lead in step lengths (the right arm
+    /// forward, its angle up, as the left foot leads), and touches nothing
+    /// else; without it the arms keep their rest angles exactly.
+    #[test]
+    fn arm_swing_turns_the_shoulders_against_the_legs() {
+        let model = NaoModel::new(Morphology::of_type(0).unwrap()).unwrap();
+        let rest = crate::nao::sim::standing_angles(&model);
+        let still = Gait::with_config(&model, WalkParams::EXPERT, 5.0, GaitConfig::OPEN_LOOP);
+        let cfg = GaitConfig {
+            arm_swing_rad: 0.3,
+            ..GaitConfig::OPEN_LOOP
+        };
+        let swung = Gait::with_config(&model, WalkParams::EXPERT, 5.0, cfg);
+        let (l, r) = (
+            model.joint_index("lae1").unwrap(),
+            model.joint_index("rae1").unwrap(),
+        );
+        let mut seen = [false; 2];
+        for i in 0..500 {
+            let t = f64::from(i) * 0.01;
+            let (a, b) = (still.targets(&rest, t), swung.targets(&rest, t));
+            assert_eq!((a[l], a[r]), (rest[l], rest[r]));
+            let feet = swung.state(t).feet;
+            let lead = (feet[0][0] - feet[1][0]) / WalkParams::EXPERT.step_length;
+            assert!((b[l] - (rest[l] - 0.3 * lead)).abs() < 1e-12, "t {t}");
+            assert!((b[r] - (rest[r] + 0.3 * lead)).abs() < 1e-12, "t {t}");
+            for j in (0..a.len()).filter(|j| *j != l && *j != r) {
+                assert_eq!(a[j].to_bits(), b[j].to_bits(), "joint {j} at {t}");
+            }
+            seen[usize::from(lead > 0.5)] |= lead.abs() > 0.5;
+        }
+        assert_eq!(seen, [true, true], "both feet lead by over half a step");
     }
 
     #[test]
