@@ -9,7 +9,9 @@ over the cycles after --skip seconds; then the steps: the foot-to-foot
 distance along x at each landing (a foot's vertical load rising through
 the header's `planted_n`, footwork's PLANTED_N, after the other foot's
 landing), their median,
-and the torso's advance.
+and the torso's advance; then the turn: the torso's yaw about the vertical
+(its range and rms about its mean) and each stance foot's mean roll and
+pitch while it alone carries the robot (docs/walk.md, "The torso's yaw").
 
     naofarm trial --experiment experiments/physical-technical.toml \\
         --trials 1 --seed 777 --substeps 2 --record /tmp/r2.jsonl
@@ -62,6 +64,35 @@ def steps(head, rows):
     return lengths, advance
 
 
+def euler(pose):
+    """(roll, pitch, yaw) of a pose [x, y, z, qx, qy, qz, qw], degrees."""
+    x, y, z, w = pose[3:]
+    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
+    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return [math.degrees(v) for v in (roll, pitch, yaw)]
+
+
+def turn(head, rows, skip):
+    bodies = [b["name"] for b in head["bodies"]]
+    torso = bodies.index("torso")
+    feet = [bodies.index("lfoot"), bodies.index("rfoot")]
+    cycles = [r for r in rows if r["t"] > skip]
+    if not cycles:
+        return
+    yaw = [euler(r["poses"][torso])[2] for r in cycles]
+    mean = statistics.mean(yaw)
+    rms = math.sqrt(statistics.mean((v - mean) ** 2 for v in yaw))
+    print(f"\ntorso yaw {min(yaw):+.1f}° … {max(yaw):+.1f}°, rms {rms:.1f}° about its mean")
+    for side, name in ((0, "left"), (1, "right")):
+        alone = [euler(r["poses"][feet[side]]) for r in cycles
+                 if r["load"][side] >= head["planted_n"] and r["load"][1 - side] < 1.0]
+        if alone:
+            print(f"{name} foot alone on the ground in {len(alone)} cycles: roll "
+                  f"{statistics.mean(e[0] for e in alone):+.1f}°, pitch "
+                  f"{statistics.mean(e[1] for e in alone):+.1f}° on average")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("records", nargs="+")
@@ -78,6 +109,7 @@ def main():
                   f"mean {statistics.mean(lengths):.4f} m; the torso advanced {advance:.3f} m")
         else:
             print(f"\nno steps; the torso advanced {advance:.3f} m")
+        turn(head, rows, a.skip)
 
 
 if __name__ == "__main__":
