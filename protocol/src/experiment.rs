@@ -460,6 +460,7 @@ impl Experiment {
                     params::Param::StepPeriod
                         | params::Param::DoubleSupport
                         | params::Param::ComAboveHip
+                        | params::Param::HipRollComp
                 )
             });
             gain_has_feedback(self.walk, &p.name).map_err(|m| invalid(f("name"), m))?;
@@ -748,6 +749,7 @@ expert = -0.04
             "physical-firm.toml",
             "physical-technical-stiff.toml",
             "physical-technical-firm.toml",
+            "physical-technical-arms.toml",
         ] {
             let path = format!("{}/../experiments/{f}", env!("CARGO_MANIFEST_DIR"));
             let text = std::fs::read_to_string(&path).unwrap();
@@ -761,7 +763,10 @@ expert = -0.04
                 assert_eq!(e.physics.pgs_iterations, 32, "{f}");
                 assert_eq!(e.fixed.get("hip_pitch_gain"), Some(&-0.75), "{f}");
             }
-            if f.ends_with("firm.toml") {
+            if f.ends_with("arms.toml") {
+                assert_eq!(e.fixed.get("arm_swing"), Some(&0.4), "{f}");
+            }
+            if f.ends_with("firm.toml") || f.ends_with("arms.toml") {
                 assert_eq!(e.physics.substeps, Physics::default().substeps, "{f}");
                 assert!(e.physics.firm_stops && e.physics.contact_hz == 60.0, "{f}");
                 assert!(e

@@ -50,6 +50,10 @@ pub enum Param {
     HipPitchGain,
     /// `ankle_pitch_gain`.
     AnklePitchGain,
+    /// `hip_roll_comp`.
+    HipRollComp,
+    /// `arm_swing`.
+    ArmSwing,
 }
 
 impl Param {
@@ -233,6 +237,27 @@ pub const KNOWN: &[KnownParam] = &[
         unit: "rad/rad",
         default: 0.0,
         doc: "stance ankle pitch per rad of sensed torso pitch; not given, the closed-loop engine's own (0)",
+    },
+    // Two more plan constants: the stance hip's roll and the arms' swing.
+    KnownParam {
+        param: Param::HipRollComp,
+        name: "hip_roll_comp",
+        role: Role::Walk,
+        min: 0.0,
+        max: 0.4,
+        unit: "rad",
+        default: 0.10,
+        doc: "stance hip-roll compensation during single support; not given, the engine's own (closed loop 0.10 rad, open loop 0.20 rad)",
+    },
+    KnownParam {
+        param: Param::ArmSwing,
+        name: "arm_swing",
+        role: Role::Walk,
+        min: 0.0,
+        max: 1.0,
+        unit: "rad",
+        default: 0.0,
+        doc: "each shoulder pitch turned against the opposite leg, per step length that leg's foot leads; not given, the engine's own (0: arms still, welded to the torso in a trial)",
     },
 ];
 

@@ -21,8 +21,9 @@ use crate::{
 /// its fingerprint, whose probe bits are unchanged); 6 since `com_above_hip`,
 /// `hip_pitch_gain` and `ankle_pitch_gain` joined it, for the same reason; 7
 /// since a trial request's physics carries `contact_hz` and `firm_stops` (its
-/// body grew two fields, which a version-6 decoder reads as a malformed body).
-pub const WIRE_VERSION: u8 = 7;
+/// body grew two fields, which a version-6 decoder reads as a malformed body);
+/// 8 since `hip_roll_comp` and `arm_swing` joined the registry.
+pub const WIRE_VERSION: u8 = 8;
 /// Largest message accepted, in bytes (checked before any allocation).
 pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
 const MAGIC: [u8; 2] = *b"NF";

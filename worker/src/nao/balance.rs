@@ -485,6 +485,36 @@ mod tests {
         );
     }
 
+    /// The arms file (`experiments/physical-technical-arms.toml`: the firm
+    /// physics with the arms swinging and the engine retuned for them) walks
+    /// its expert set at pace as planned within 1° of every stop, and the
+    /// arms are what hold it: with them still (`arm_swing` 0, welded) every
+    /// trial falls (measured over seeds 777–806: s 1.00, 4.446 m of 4.631 m
+    /// planned, 0.17° at worst; still, s 0).
+    #[test]
+    fn the_arms_experiment_walks_its_expert_at_pace_and_falls_with_its_arms_still() {
+        let exp = experiment(include_str!(
+            "../../../experiments/physical-technical-arms.toml"
+        ));
+        let physics = SimSettings::with_physics(&exp.physics);
+        let expert = expert_of(&exp);
+        let (ts, ..) = walks_at_pace_as_planned(&expert, 30, physics);
+        for t in &ts {
+            for e in &t.stop_excess {
+                assert!(e.rad.to_degrees() <= 1.0, "expert, seed {}: {e:?}", t.seed);
+            }
+        }
+        let mut still = expert;
+        still.set(protocol::params::Param::ArmSwing, 0.0).unwrap();
+        let batch = Batch {
+            seed0: 777,
+            n: 10,
+            threads: 2,
+        };
+        let ts = run_many(0, &still, batch, 10.0, physics, closed()).unwrap();
+        assert!(ts.iter().all(|t| t.measurement.fell), "a trial stood");
+    }
+
     /// Arm swing steadies a fast walk that pivots about its stance foot
     /// (docs/walk.md, "The torso's yaw"): the firm file's experiment-2
     /// Optim.1 body at 0.15 s steps of 0.07 m falls in every trial with the

@@ -191,7 +191,9 @@ impl Morphology {
             | Param::DoubleSupport
             | Param::ComAboveHip
             | Param::HipPitchGain
-            | Param::AnklePitchGain => None,
+            | Param::AnklePitchGain
+            | Param::HipRollComp
+            | Param::ArmSwing => None,
         }
     }
 

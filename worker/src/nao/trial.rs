@@ -302,8 +302,9 @@ pub fn run_observed(
 ) -> Result<NaoTrial, NaoTrialError> {
     let model = NaoModel::with_params(robot_type, params)?;
     let walk: WalkParams = params.walk();
-    let gait = Gait::with_config(&model, walk, duration_s, engine.gait.with_params(params));
-    if engine.gait.arm_swing_rad != 0.0 {
+    let cfg = engine.gait.with_params(params);
+    let gait = Gait::with_config(&model, walk, duration_s, cfg);
+    if cfg.arm_swing_rad != 0.0 {
         // Swinging arms must move: not welded to the torso.
         settings.weld_upper_body = false;
     }

@@ -152,7 +152,8 @@ impl GaitConfig {
     };
 
     /// These constants with the parameter set's `step_period`,
-    /// `double_support` and `com_above_hip`, where it gives them (the
+    /// `double_support`, `com_above_hip`, `hip_roll_comp` and `arm_swing`,
+    /// where it gives them (the
     /// registry's walk-engine parameters; an experiment may fix or optimise
     /// them).
     #[must_use]
@@ -165,6 +166,10 @@ impl GaitConfig {
             com_above_hip_m: params
                 .given(Param::ComAboveHip)
                 .unwrap_or(self.com_above_hip_m),
+            hip_roll_comp_rad: params
+                .given(Param::HipRollComp)
+                .unwrap_or(self.hip_roll_comp_rad),
+            arm_swing_rad: params.given(Param::ArmSwing).unwrap_or(self.arm_swing_rad),
             ..self
         }
     }
@@ -723,6 +728,17 @@ mod tests {
             GaitConfig {
                 period_s: 0.22,
                 double_support: 0.0,
+                ..GaitConfig::OPEN_LOOP
+            }
+        );
+        let mut q = ParamValues::default();
+        q.set(Param::HipRollComp, 0.07).unwrap();
+        q.set(Param::ArmSwing, 0.4).unwrap();
+        assert_eq!(
+            GaitConfig::OPEN_LOOP.with_params(&q),
+            GaitConfig {
+                hip_roll_comp_rad: 0.07,
+                arm_swing_rad: 0.4,
                 ..GaitConfig::OPEN_LOOP
             }
         );
