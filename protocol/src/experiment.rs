@@ -750,6 +750,7 @@ expert = -0.04
             "physical-technical-stiff.toml",
             "physical-technical-firm.toml",
             "physical-technical-arms.toml",
+            "physical-arms.toml",
         ] {
             let path = format!("{}/../experiments/{f}", env!("CARGO_MANIFEST_DIR"));
             let text = std::fs::read_to_string(&path).unwrap();

@@ -403,6 +403,9 @@ const STIFF: &str = include_str!("../../experiments/physical-technical-stiff.tom
 /// `experiments/physical-technical-firm.toml`: the farm's step with stops
 /// that hold within it, measured beside the default too.
 const FIRM: &str = include_str!("../../experiments/physical-technical-firm.toml");
+/// `experiments/physical-technical-arms.toml`: the firm physics with the
+/// arms swinging (and so not welded), measured beside the default too.
+const ARMS: &str = include_str!("../../experiments/physical-technical-arms.toml");
 
 /// The walk of a shipped experiment file, as the file sets it (its physics
 /// and its fixed values, with its expert set), measured like the others.
@@ -526,6 +529,13 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
         "firm file: 2x10ms, pgs 28, firm stops, 60Hz",
     )?);
     let firm = rows.len() - 1;
+    rows.push(measure_file_walk(
+        ARMS,
+        "arms",
+        a.seconds,
+        "arms file: the firm file's, arms swinging",
+    )?);
+    let arms = rows.len() - 1;
     let rtf = |r: &Row| r.sim_s / r.wall_s;
     let sps = |r: &Row| r.sim_s / CYCLE_S * f64::from(r.settings.substeps) / r.wall_s;
     let headline = rows
@@ -545,6 +555,8 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
     let stiff_share = rtf(stiff) / rtf(headline);
     let firm = &rows[firm];
     let firm_share = rtf(firm) / rtf(headline);
+    let arms = &rows[arms];
+    let arms_share = rtf(arms) / rtf(headline);
     // What a physics step costs there against the default's: about the same,
     // so the converged walk's share follows its steps per cycle (docs/walk.md,
     // "Why no code speed-up meets the 80 % on converged physics").
@@ -563,6 +575,8 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             "stiff_share_of_open_loop": stiff_share,
             "firm_realtime_factor": rtf(firm),
             "firm_share_of_open_loop": firm_share,
+            "arms_realtime_factor": rtf(arms),
+            "arms_share_of_open_loop": arms_share,
             "rows": rows.iter().map(|r| serde_json::json!({
                 "settings": r.label,
                 "motion": r.motion,
@@ -620,6 +634,11 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             "closed-loop walk of the firm experiment: {:.1}x real time, {:.0} % of the open loop's at the default",
             rtf(firm),
             100.0 * firm_share
+        );
+        outln!(
+            "closed-loop walk of the arms experiment: {:.1}x real time, {:.0} % of the open loop's at the default",
+            rtf(arms),
+            100.0 * arms_share
         );
     }
     Ok(())
