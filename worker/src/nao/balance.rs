@@ -35,10 +35,13 @@
 //! - Hip-pitch gain −1.5 rad/rad: −1 → 4.07 m, −1.5 → 4.15 m, −2 → 4.16 m
 //!   with s 0.98 over 100 trials; 0 → 3.81 m.
 //!
-//! The step period, double support, CoM height and the hip- and ankle-pitch
-//! gains are registry parameters too (`step_period`, `double_support`,
-//! `com_above_hip`, `hip_pitch_gain`, `ankle_pitch_gain`): a set that gives
-//! one replaces the constant here. The stiff configuration
+//! The step period, double support, CoM height, the stance hip-roll
+//! compensation, the arm swing and the hip- and ankle-pitch gains are
+//! registry parameters too (`step_period`, `double_support`,
+//! `com_above_hip`, `hip_roll_comp`, `arm_swing`, `hip_pitch_gain`,
+//! `ankle_pitch_gain`): a set that gives one replaces the constant here.
+//! The arms configuration (`experiments/physical-technical-arms.toml`)
+//! swings the arms: docs/walk.md, "Swinging arms at the league's pace". The stiff configuration
 //! (`experiments/physical-technical-stiff.toml`, 32 PGS iterations) fixes
 //! 0.19 s, 0, 0.05 m, −0.75 and 0.3: with these constants the expert set
 //! falls there in 80 % of its trials (docs/walk.md, "A stiffer solve").

@@ -91,10 +91,10 @@ pub struct GaitConfig {
     /// Arm swing: each shoulder pitch (`lae1`, `rae1`) turns this far from
     /// its rest angle per step length the opposite foot leads, rad (the
     /// right arm forward as the left foot is, as people walk); 0: arms at
-    /// rest, and welded to the torso in a trial. A measuring lever
-    /// (`--engine arm_swing_rad`): the arms' swing carries angular momentum
-    /// about the vertical against the legs' (docs/walk.md, "The torso's
-    /// yaw").
+    /// rest, and welded to the torso in a trial. The registry's `arm_swing`
+    /// (0–1) sets it, and so does `--engine arm_swing_rad` (−1–1, for
+    /// measuring): the arms' swing carries angular momentum about the
+    /// vertical against the legs' (docs/walk.md, "The torso's yaw").
     pub arm_swing_rad: f64,
 }
 
