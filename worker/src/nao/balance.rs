@@ -329,6 +329,15 @@ mod tests {
         protocol::Experiment::from_toml(toml).unwrap()
     }
 
+    /// A shipped experiment file: parsed, its physics and its expert set
+    /// (with its fixed values).
+    fn shipped(toml: &str) -> (protocol::Experiment, SimSettings, ParamValues) {
+        let exp = experiment(toml);
+        let physics = SimSettings::with_physics(&exp.physics);
+        let expert = expert_of(&exp);
+        (exp, physics, expert)
+    }
+
     /// `exp`'s expert set with its fixed values, as a worker gets it.
     fn expert_of(exp: &protocol::Experiment) -> ParamValues {
         ParamValues::from_named(&exp.full_params(&exp.expert_values())).unwrap()
@@ -432,11 +441,9 @@ mod tests {
     /// the file's L (its 32 corners and centre; measured: 0.95° at worst).
     #[test]
     fn the_converged_experiment_walks_at_pace_within_the_stops() {
-        let exp = experiment(include_str!(
+        let (exp, physics, expert) = shipped(include_str!(
             "../../../experiments/physical-technical-converged.toml"
         ));
-        let physics = SimSettings::with_physics(&exp.physics);
-        let expert = expert_of(&exp);
         let (_, s, mx, planned) = walks_at_pace_within_the_stops(&expert, 30, physics);
         let sets = corners_of_l(&exp, true);
         assert_eq!(sets.len(), 33);
@@ -468,12 +475,10 @@ mod tests {
     /// with the default 12 iterations takes a joint past 1° in these trials.
     #[test]
     fn the_stiff_experiment_keeps_the_experts_stops_at_the_farms_step() {
-        let exp = experiment(include_str!(
+        let (exp, physics, expert) = shipped(include_str!(
             "../../../experiments/physical-technical-stiff.toml"
         ));
         assert_eq!(exp.physics.substeps, protocol::Physics::default().substeps);
-        let physics = SimSettings::with_physics(&exp.physics);
-        let expert = expert_of(&exp);
         let worst = |ts: &[NaoTrial]| {
             ts.iter()
                 .flat_map(|t| t.stop_excess.iter().map(|e| e.rad.to_degrees()))
@@ -507,11 +512,9 @@ mod tests {
     /// planned, 0.17° at worst; still, s 0).
     #[test]
     fn the_arms_experiment_walks_its_expert_at_pace_and_falls_with_its_arms_still() {
-        let exp = experiment(include_str!(
+        let (_, physics, expert) = shipped(include_str!(
             "../../../experiments/physical-technical-arms.toml"
         ));
-        let physics = SimSettings::with_physics(&exp.physics);
-        let expert = expert_of(&exp);
         walks_at_pace_within_the_stops(&expert, 30, physics);
         let mut still = expert;
         still.set(protocol::params::Param::ArmSwing, 0.0).unwrap();
@@ -532,11 +535,9 @@ mod tests {
     /// 1.0, seeds 3–12), its shoulders then moving against the legs.
     #[test]
     fn swinging_arms_steady_a_fast_walk_that_falls_without_them() {
-        let exp = experiment(include_str!(
+        let (_, physics, mut p) = shipped(include_str!(
             "../../../experiments/physical-technical-firm.toml"
         ));
-        let physics = SimSettings::with_physics(&exp.physics);
-        let mut p = expert_of(&exp);
         for (name, v) in [
             ("ThighRelHip2_Z", -0.0798),
             ("ratio_flexion", 0.8213),
@@ -564,10 +565,13 @@ mod tests {
             model.joint_index("lae1").unwrap(),
             model.joint_index("rae1").unwrap(),
         );
+        let rest = crate::nao::sim::standing_angles(&model);
         let mut opposed = 0;
         trial::run_observed(0, &p, 3, 2.0, physics, engine, &mut |_, s, _| {
-            let rest = -90f64.to_radians();
-            let (a, b) = (s.joint_angles_rad[l] - rest, s.joint_angles_rad[r] - rest);
+            let (a, b) = (
+                s.joint_angles_rad[l] - rest[l],
+                s.joint_angles_rad[r] - rest[r],
+            );
             if a * b < 0.0 && a.abs().min(b.abs()) > 0.05 {
                 opposed += 1;
             }
@@ -586,13 +590,11 @@ mod tests {
     /// The stops are what hold them: without them L passes 2° in these trials.
     #[test]
     fn the_firm_experiment_keeps_every_stop_bound_at_the_farms_step() {
-        let exp = experiment(include_str!(
+        let (exp, physics, expert) = shipped(include_str!(
             "../../../experiments/physical-technical-firm.toml"
         ));
         assert_eq!(exp.physics.substeps, protocol::Physics::default().substeps);
         assert!(exp.physics.firm_stops);
-        let physics = SimSettings::with_physics(&exp.physics);
-        let expert = expert_of(&exp);
         let (_, s, mx, planned) = walks_at_pace_within_the_stops(&expert, 30, physics);
         let sets = corners_of_l(&exp, true);
         assert_eq!(sets.len(), 33);

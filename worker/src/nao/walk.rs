@@ -497,7 +497,11 @@ impl Gait {
     /// le1..le6, with the stance hip-roll compensation.
     #[must_use]
     pub fn leg_targets(&self, t: f64) -> [[f64; 6]; 2] {
-        let st = self.state(t);
+        self.legs_at(&self.state(t))
+    }
+
+    /// [`Gait::leg_targets`] for the gait's state `st` at some time.
+    fn legs_at(&self, st: &GaitState) -> [[f64; 6]; 2] {
         let mut out = [[0.0; 6]; 2];
         for (side, o) in out.iter_mut().enumerate() {
             let y = if side == 0 {
@@ -529,11 +533,12 @@ impl Gait {
     /// agent clamps its servo targets: commanding a hinge into its stop only
     /// loads the limit constraint, which then yields a few degrees.
     pub fn targets(&self, rest: &[f64], t: f64) -> Vec<f64> {
-        let legs = self.leg_targets(t);
+        let st = self.state(t);
+        let legs = self.legs_at(&st);
         let mut q = rest.to_vec();
         if self.cfg.arm_swing_rad != 0.0 {
             // How far the left foot leads the right, in step lengths.
-            let feet = self.state(t).feet;
+            let feet = st.feet;
             let lead = ((feet[0][0] - feet[1][0]) / self.p.step_length.max(1e-3)).clamp(-1.5, 1.5);
             for (side, joint) in self.shoulders.iter().enumerate() {
                 let sign = if side == 0 { -1.0 } else { 1.0 };
