@@ -63,6 +63,10 @@ pub struct SimSettings {
     pub contact_prediction_m: f64,
     /// Weld head and arms to the torso at their start angles.
     pub weld_upper_body: bool,
+    /// Weld the head even when the upper body is not welded (swinging arms:
+    /// a multibody's cost grows faster than its degrees of freedom, and the
+    /// walk holds the head still).
+    pub weld_head: bool,
     /// Motor damping (velocity constraint stiffness), N·m·s/rad.
     pub motor_damping: f64,
     /// Passive damping in every hinge, N·m·s/rad (multibody joints only).
@@ -109,6 +113,7 @@ impl Default for SimSettings {
             contact_hz: physics.contact_hz,
             contact_prediction_m: 0.005,
             weld_upper_body: true,
+            weld_head: false,
             motor_damping: 1000.0,
             joint_damping: 0.0,
             armature_kg_m2: physics.armature_kg_m2,
@@ -297,7 +302,13 @@ fn welded_offset(rel: &Iso, centre: [f64; 3], torso_centre: [f64; 3]) -> Iso {
 /// Whether a joint belongs to the head or the arms.
 #[must_use]
 pub fn is_upper_body_joint(name: &str) -> bool {
-    name.starts_with("he") || name.starts_with("lae") || name.starts_with("rae")
+    name.starts_with("he") || is_arm_joint(name)
+}
+
+/// Whether a joint is one of the arms' (shoulders, elbows).
+#[must_use]
+pub fn is_arm_joint(name: &str) -> bool {
+    name.starts_with("lae") || name.starts_with("rae")
 }
 
 impl Sim {
@@ -376,8 +387,14 @@ impl Sim {
         let welded: Vec<bool> = {
             let pj = kinematics::parent_joints(model);
             pj.iter()
-                .map(|j| j.is_some_and(|j| is_upper_body_joint(&model.joints[j].name)))
-                .map(|up| up && settings.weld_upper_body)
+                .map(|j| {
+                    j.is_some_and(|j| {
+                        let name = &model.joints[j].name;
+                        is_upper_body_joint(name)
+                            && (settings.weld_upper_body
+                                || settings.weld_head && !is_arm_joint(name))
+                    })
+                })
                 .collect()
         };
         // Bodies.
@@ -618,10 +635,14 @@ impl Sim {
                 let rel = g[joint.parent].rotation.inverse() * g[joint.child].rotation;
                 let q = rel.quaternion();
                 let twist = q.imag().dot(&Vector3::from(joint.axis));
-                out[j] = 2.0 * libm::atan2(twist, q.w);
-                if out[j] > std::f64::consts::PI {
-                    out[j] -= std::f64::consts::TAU;
-                }
+                // q and -q are the same turn: take the one with w >= 0, so
+                // the angle is in [-pi, pi].
+                let (twist, w) = if q.w < 0.0 {
+                    (-twist, -q.w)
+                } else {
+                    (twist, q.w)
+                };
+                out[j] = 2.0 * libm::atan2(twist, w);
             }
             return out;
         }
@@ -912,15 +933,26 @@ mod tests {
 
     #[test]
     fn rapier_pose_matches_forward_kinematics() {
-        for (weld, impulse) in [(false, false), (true, false), (true, true)] {
+        for (weld, weld_head, impulse) in [
+            (false, false, false),
+            (false, true, false),
+            (true, false, false),
+            (true, false, true),
+        ] {
             let m = model(4);
             let q = standing_angles(&m);
             let settings = SimSettings {
                 weld_upper_body: weld,
+                weld_head,
                 impulse_joints: impulse,
                 ..SimSettings::default()
             };
             let sim = Sim::new(&m, settings, &Start::upright(q.clone())).unwrap();
+            for (j, joint) in m.joints.iter().enumerate() {
+                let welded = is_upper_body_joint(&joint.name)
+                    && (weld || weld_head && !is_arm_joint(&joint.name));
+                assert_eq!(sim.is_motorised(j), !welded, "{}", joint.name);
+            }
             let ours = sim.body_motions();
             let angles = sim.joint_angles();
             // Impulse joints read angles back from f32 body rotations.

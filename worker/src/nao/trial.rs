@@ -305,8 +305,10 @@ pub fn run_observed(
     let cfg = engine.gait.with_params(params);
     let gait = Gait::with_config(&model, walk, duration_s, cfg);
     if cfg.arm_swing_rad != 0.0 {
-        // Swinging arms must move: not welded to the torso.
+        // Swinging arms must move: not welded to the torso (the head
+        // stays welded, as in every other trial).
         settings.weld_upper_body = false;
+        settings.weld_head = true;
     }
     let mut balance = engine
         .feedback
