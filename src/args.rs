@@ -466,6 +466,10 @@ pub struct TrialArgs {
     /// `true` or `false` (default false, or the experiment's).
     #[arg(long)]
     pub firm_stops: Option<bool>,
+    /// With firm stops, how near a stop a joint gets its limit row, degrees,
+    /// 1–20 (`[physics] firm_stop_window_deg`; default 3, or the experiment's).
+    #[arg(long)]
+    pub firm_stop_window_deg: Option<f64>,
     /// Record the first trial (seed --seed; with --run, the farm trial):
     /// every body's pose each 20 ms cycle, as JSON lines, for a replay.
     #[arg(long, value_name = "FILE")]
@@ -482,7 +486,8 @@ pub struct TrialArgs {
         value_name = "DIR",
         requires_all = ["iteration", "trial"],
         conflicts_with_all = ["params", "trials", "seed", "robot_type", "duration", "substeps",
-            "solver_iterations", "pgs_iterations", "armature", "contact_hz", "firm_stops"]
+            "solver_iterations", "pgs_iterations", "armature", "contact_hz", "firm_stops",
+            "firm_stop_window_deg"]
     )]
     pub run_dir: Option<std::path::PathBuf>,
     /// With --run: the iteration.

@@ -22,8 +22,9 @@ use crate::{
 /// `hip_pitch_gain` and `ankle_pitch_gain` joined it, for the same reason; 7
 /// since a trial request's physics carries `contact_hz` and `firm_stops` (its
 /// body grew two fields, which a version-6 decoder reads as a malformed body);
-/// 8 since `hip_roll_comp` and `arm_swing` joined the registry.
-pub const WIRE_VERSION: u8 = 8;
+/// 8 since `hip_roll_comp` and `arm_swing` joined the registry; 9 since a
+/// trial request's physics carries `firm_stop_window_deg`.
+pub const WIRE_VERSION: u8 = 9;
 /// Largest message accepted, in bytes (checked before any allocation).
 pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
 const MAGIC: [u8; 2] = *b"NF";
@@ -832,8 +833,8 @@ mod tests {
         fn trial_request_round_trips(run in run(), i in any::<u64>(), k in any::<u32>(), seed in any::<u64>(),
                                      d in 0.1f64..100.0, ps in params(), t in 0u8..5, disp in any::<u64>(),
                                      sub in 1u32..=50, its in 1u32..=16, pgs in 1u32..=200, arm in 0.0f64..0.1, hz in 10.0f64..10_000.0, firm in any::<bool>(),
-                                     closed in any::<bool>()) {
-            let physics = Physics { substeps: sub, solver_iterations: its, pgs_iterations: pgs, armature_kg_m2: arm, contact_hz: hz, firm_stops: firm };
+                                     window in 1.0f64..20.0, closed in any::<bool>()) {
+            let physics = Physics { substeps: sub, solver_iterations: its, pgs_iterations: pgs, armature_kg_m2: arm, contact_hz: hz, firm_stops: firm, firm_stop_window_deg: window };
             let m = TrialRequest { run, iteration: i, trial: k, seed, model: TrialModel::Synthetic,
                                    robot_type: t, duration_s: d, params: ps, dispatch: disp, physics,
                                    walk: if closed { WalkEngine::ClosedLoop } else { WalkEngine::OpenLoop } };
@@ -971,10 +972,10 @@ mod tests {
             Err(DecodeError::Trailing { extra: 1, .. })
         ));
         let mut b = outcome().encode().unwrap();
-        b[2] = 9;
+        b[2] = WIRE_VERSION + 1;
         assert!(matches!(
             TrialOutcome::decode(&b),
-            Err(DecodeError::Version { found: 9, .. })
+            Err(DecodeError::Version { found, .. }) if found == WIRE_VERSION + 1
         ));
         let b = outcome().encode().unwrap();
         assert!(matches!(

@@ -85,6 +85,7 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         armature_kg_m2: a.armature.unwrap_or(d.armature_kg_m2),
         contact_hz: a.contact_hz.unwrap_or(d.contact_hz),
         firm_stops: a.firm_stops.unwrap_or(d.firm_stops),
+        firm_stop_window_deg: a.firm_stop_window_deg.unwrap_or(d.firm_stop_window_deg),
     };
     physics.validate().map_err(|(field, m)| {
         let flag = field.trim_end_matches("_kg_m2").replace('_', "-");

@@ -35,10 +35,6 @@ pub const SANE_SPIN_RAD_S: f64 = 500.0;
 /// SimSpark's drag coefficient (force per velocity, torque per angular velocity).
 pub const DRAG: f64 = 0.01;
 const GRAVITY: f64 = 9.81;
-/// With firm stops, a hinge this near a stop gets a speculative limit row
-/// (docs/walk.md, "Firm stops": 1° and 3° hold L alike; 3° keeps a fast
-/// joint's row in place a step ahead).
-pub const FIRM_STOP_WINDOW_DEG: f64 = 3.0;
 /// With firm stops, limit rows are solved again after the contacts once a
 /// joint is past this (negative: before the stop, so the speculative rows
 /// are solved again too).
@@ -82,10 +78,16 @@ pub struct SimSettings {
     /// leaving the idle rows out changes no bit.
     pub every_limit_row: bool,
     /// Stops that hold within a step (`protocol::Physics::firm_stops`): a
-    /// speculative limit row for every hinge within [`FIRM_STOP_WINDOW_DEG`] of
+    /// speculative limit row for every hinge within `firm_stop_window_deg` of
     /// a stop, and the limit rows solved again after the contacts (the vendored
     /// rapier3d's `speculative_joint_limits` and `joint_limits_after_contacts`).
     pub firm_stops: bool,
+    /// With firm stops, a hinge this near a stop gets a speculative limit
+    /// row, degrees (`protocol::Physics::firm_stop_window_deg`; docs/walk.md,
+    /// "Firm stops": 1° and 3° hold the firm file's L alike; 3° keeps a fast
+    /// joint's row in place a step ahead; "The stop window": the arms file
+    /// needs 8°).
+    pub firm_stop_window_deg: f64,
     /// Every joint's speed cap times this (1: the league's robot): kept to
     /// measure which limit stops a walk (`naofarm trial --limit`), not for trials.
     pub speed_cap_scale: f64,
@@ -120,6 +122,7 @@ impl Default for SimSettings {
             impulse_joints: false,
             every_limit_row: false,
             firm_stops: physics.firm_stops,
+            firm_stop_window_deg: physics.firm_stop_window_deg,
             speed_cap_scale: 1.0,
             speed_cap_joints: 0,
             max_torque_nm: MAX_TORQUE_NM,
@@ -139,6 +142,7 @@ impl SimSettings {
             armature_kg_m2: physics.armature_kg_m2,
             contact_hz: physics.contact_hz,
             firm_stops: physics.firm_stops,
+            firm_stop_window_deg: physics.firm_stop_window_deg,
             ..Self::default()
         }
     }
@@ -742,7 +746,7 @@ impl Sim {
         let inv_dt = self.world.integration_parameters.inv_dt();
         let every_limit_row = self.settings.every_limit_row;
         let window = if self.settings.firm_stops {
-            FIRM_STOP_WINDOW_DEG.to_radians() as f32
+            self.settings.firm_stop_window_deg.to_radians() as f32
         } else {
             0.0
         };
