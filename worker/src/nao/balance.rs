@@ -447,22 +447,11 @@ mod tests {
         let (_, s, mx, planned) = walks_at_pace_within_the_stops(&expert, 30, physics);
         let sets = corners_of_l(&exp, true);
         assert_eq!(sets.len(), 33);
-        let worst = trial::in_parallel(sets.len() as u64, 2, |i| {
-            let named = &sets[i as usize];
-            let p = ParamValues::from_named(named).unwrap();
-            let t = run(0, &p, 1, 10.0, physics, closed()).unwrap();
-            let worst = t
-                .stop_excess
-                .iter()
-                .map(|e| e.rad.to_degrees())
-                .fold(0.0, f64::max);
-            (worst, named.clone())
-        })
-        .unwrap();
-        for (deg, named) in &worst {
+        let over = worst_over(&sets, physics);
+        for (deg, named) in &over {
             assert!(*deg <= 2.0, "{named:?}: {deg:.2}°");
         }
-        let over_l = worst.iter().map(|(deg, _)| *deg).fold(0.0, f64::max);
+        let over_l = worst(&over);
         println!("expert: s {s:.2}, mx {mx:.3} m (planned {planned:.3}); over L: {over_l:.2}°");
     }
 
