@@ -117,14 +117,14 @@ pub enum WalkEngine {
     ClosedLoop,
 }
 
-/// A feedback gain (`hip_pitch_gain`, `ankle_pitch_gain`) needs a walk with
+/// A feedback gain (`hip_pitch_gain`, `ankle_pitch_gain`, `turn_place`) needs a walk with
 /// feedback: the open loop has none to give it to, so a parameter set for it
 /// that names one is refused (by an experiment file and by `naofarm trial`).
 pub fn gain_has_feedback(walk: WalkEngine, name: &str) -> Result<(), String> {
     let gain = params::find(name).is_some_and(|k| {
         matches!(
             k.param,
-            params::Param::HipPitchGain | params::Param::AnklePitchGain
+            params::Param::HipPitchGain | params::Param::AnklePitchGain | params::Param::TurnPlace
         )
     });
     if gain && walk == WalkEngine::OpenLoop {

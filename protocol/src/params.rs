@@ -54,6 +54,8 @@ pub enum Param {
     HipRollComp,
     /// `arm_swing`.
     ArmSwing,
+    /// `turn_place`.
+    TurnPlace,
 }
 
 impl Param {
@@ -258,6 +260,17 @@ pub const KNOWN: &[KnownParam] = &[
         unit: "rad",
         default: 0.0,
         doc: "each shoulder pitch turned against the opposite leg, per step length that leg's foot leads; not given, the engine's own (0: arms still, welded to the torso in a trial)",
+    },
+    // Where the feet land when the torso turns.
+    KnownParam {
+        param: Param::TurnPlace,
+        name: "turn_place",
+        role: Role::Walk,
+        min: 0.0,
+        max: 2.0,
+        unit: "rad/rad",
+        default: 0.0,
+        doc: "the feet placed against this share of the torso's sensed turn about the vertical (1: where the plan has them in the walk's frame); not given, the closed-loop engine's own (0: in the torso's frame)",
     },
 ];
 

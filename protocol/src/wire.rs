@@ -23,8 +23,9 @@ use crate::{
 /// since a trial request's physics carries `contact_hz` and `firm_stops` (its
 /// body grew two fields, which a version-6 decoder reads as a malformed body);
 /// 8 since `hip_roll_comp` and `arm_swing` joined the registry; 9 since a
-/// trial request's physics carries `firm_stop_window_deg`.
-pub const WIRE_VERSION: u8 = 9;
+/// trial request's physics carries `firm_stop_window_deg`; 10 since
+/// `turn_place` joined the registry.
+pub const WIRE_VERSION: u8 = 10;
 /// Largest message accepted, in bytes (checked before any allocation).
 pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
 const MAGIC: [u8; 2] = *b"NF";

@@ -193,7 +193,8 @@ impl Morphology {
             | Param::HipPitchGain
             | Param::AnklePitchGain
             | Param::HipRollComp
-            | Param::ArmSwing => None,
+            | Param::ArmSwing
+            | Param::TurnPlace => None,
         }
     }
 

@@ -341,7 +341,13 @@ pub fn run_observed(
             None => None,
             Some(b) => {
                 let sensed = noisy(&perception, &mut rng);
-                Some(gait.corrected(&q_next, &b.update(&sensed, CYCLE_S)))
+                let c = b.update(&sensed, CYCLE_S);
+                if c.turn == 0.0 {
+                    Some(gait.corrected(&q_next, &c))
+                } else {
+                    let q = gait.targets_turned(&rest, t + CYCLE_S, c.turn);
+                    Some(gait.corrected(&q, &c))
+                }
             }
         };
         let cmd: Vec<f64> = perception

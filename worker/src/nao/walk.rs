@@ -497,11 +497,14 @@ impl Gait {
     /// le1..le6, with the stance hip-roll compensation.
     #[must_use]
     pub fn leg_targets(&self, t: f64) -> [[f64; 6]; 2] {
-        self.legs_at(&self.state(t))
+        self.legs_at(&self.state(t), 0.0)
     }
 
-    /// [`Gait::leg_targets`] for the gait's state `st` at some time.
-    fn legs_at(&self, st: &GaitState) -> [[f64; 6]; 2] {
+    /// [`Gait::leg_targets`] for the gait's state `st` at some time, each
+    /// foot's place about the hip midpoint turned by `-turn` (rad) about the
+    /// vertical: a torso turned by `turn` then puts the feet where the plan
+    /// has them (0: the plan's own, exactly).
+    fn legs_at(&self, st: &GaitState, turn: f64) -> [[f64; 6]; 2] {
         let mut out = [[0.0; 6]; 2];
         for (side, o) in out.iter_mut().enumerate() {
             let y = if side == 0 {
@@ -510,7 +513,14 @@ impl Gait {
                 -self.leg.hip[1]
             };
             let f = st.feet[side];
-            let p = [f[0] - st.hip[0], f[1] - st.hip[1] - y, f[2] - st.hip[2]];
+            let (dx, dy) = (f[0] - st.hip[0], f[1] - st.hip[1]);
+            let (dx, dy) = if turn == 0.0 {
+                (dx, dy)
+            } else {
+                let (s, c) = libm::sincos(turn);
+                (c * dx + s * dy, c * dy - s * dx)
+            };
+            let p = [dx, dy - y, f[2] - st.hip[2]];
             *o = if self.cfg.yaw_pitch_rad == 0.0 {
                 leg_ik(p, &self.leg)
             } else {
@@ -533,8 +543,15 @@ impl Gait {
     /// agent clamps its servo targets: commanding a hinge into its stop only
     /// loads the limit constraint, which then yields a few degrees.
     pub fn targets(&self, rest: &[f64], t: f64) -> Vec<f64> {
+        self.targets_turned(rest, t, 0.0)
+    }
+
+    /// [`Gait::targets`] with the feet placed against a torso turned by
+    /// `turn` (rad, about the vertical; [`Gait::legs_at`]).
+    #[must_use]
+    pub fn targets_turned(&self, rest: &[f64], t: f64, turn: f64) -> Vec<f64> {
         let st = self.state(t);
-        let legs = self.legs_at(&st);
+        let legs = self.legs_at(&st, turn);
         let mut q = rest.to_vec();
         if self.cfg.arm_swing_rad != 0.0 {
             // How far the left foot leads the right, in step lengths.
@@ -680,6 +697,52 @@ mod tests {
             );
             checked += 1;
         }
+    }
+
+    /// Legs placed against a turned torso (`turn_place`) put both feet where
+    /// the plan has them in the walk's frame: forward kinematics of the
+    /// turned legs, turned back with the torso, lands on the plan's feet;
+    /// and a turn of 0 is the plan's own targets, bit for bit.
+    #[test]
+    fn turned_legs_put_the_feet_where_the_plan_has_them() {
+        let model = NaoModel::new(Morphology::of_type(0).unwrap()).unwrap();
+        let cfg = GaitConfig {
+            hip_roll_comp_rad: 0.0,
+            ..crate::nao::balance::GAIT
+        };
+        let g = Gait::with_config(&model, WalkParams::EXPERT, 3.0, cfg);
+        let rest = crate::nao::sim::standing_angles(&model);
+        let mut checked = 0;
+        for i in 0..40 {
+            let t = 0.6 + 0.037 * f64::from(i);
+            assert_eq!(g.targets_turned(&rest, t, 0.0), g.targets(&rest, t));
+            let st = g.state(t);
+            for turn in [-0.3, -0.1, 0.12, 0.25] {
+                let legs = g.legs_at(&st, turn);
+                let back = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), turn);
+                for (side, leg) in legs.iter().enumerate() {
+                    let Some((at, _)) = foot_of(&model, &g.leg, side, leg) else {
+                        continue;
+                    };
+                    let y = if side == 0 {
+                        g.leg.hip[1]
+                    } else {
+                        -g.leg.hip[1]
+                    };
+                    let walk = back * Vector3::new(at[0], at[1] + y, at[2]);
+                    let f = st.feet[side];
+                    let plan = [f[0] - st.hip[0], f[1] - st.hip[1], f[2] - st.hip[2]];
+                    for k in 0..3 {
+                        assert!(
+                            (walk[k] - plan[k]).abs() < 1e-6,
+                            "t {t} turn {turn} side {side}: {walk:?} against {plan:?}"
+                        );
+                    }
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked >= 280, "only {checked} of 320 reachable");
     }
 
     /// The lift's shapes (`--engine lift_peak`, `lift_end`) peak where asked
