@@ -774,6 +774,8 @@ expert = -0.04
             "physical-technical-firm.toml",
             "physical-technical-arms.toml",
             "physical-arms.toml",
+            "physical-technical-arms-5ms.toml",
+            "physical-arms-5ms.toml",
         ] {
             let path = format!("{}/../experiments/{f}", env!("CARGO_MANIFEST_DIR"));
             let text = std::fs::read_to_string(&path).unwrap();
@@ -787,7 +789,7 @@ expert = -0.04
                 assert_eq!(e.physics.pgs_iterations, 32, "{f}");
                 assert_eq!(e.fixed.get("hip_pitch_gain"), Some(&-0.75), "{f}");
             }
-            if f.ends_with("arms.toml") {
+            if f.contains("arms") {
                 assert_eq!(e.fixed.get("arm_swing"), Some(&0.4), "{f}");
                 assert_eq!(e.physics.firm_stop_window_deg, 8.0, "{f}");
                 assert!(e
@@ -797,8 +799,13 @@ expert = -0.04
             } else {
                 assert_eq!(e.physics.firm_stop_window_deg, 3.0, "{f}");
             }
-            if f.ends_with("firm.toml") || f.ends_with("arms.toml") {
-                assert_eq!(e.physics.substeps, Physics::default().substeps, "{f}");
+            if f.ends_with("firm.toml") || f.contains("arms") {
+                let substeps = if f.ends_with("5ms.toml") {
+                    4
+                } else {
+                    Physics::default().substeps
+                };
+                assert_eq!(e.physics.substeps, substeps, "{f}");
                 assert!(e.physics.firm_stops && e.physics.contact_hz == 60.0, "{f}");
                 assert!(e
                     .physics

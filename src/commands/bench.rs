@@ -394,18 +394,58 @@ fn measure_walk(
     })
 }
 
-/// `experiments/physical-technical-converged.toml`, whose physics and fixed
-/// values `bench sim` measures beside the default.
-const CONVERGED: &str = include_str!("../../experiments/physical-technical-converged.toml");
-/// `experiments/physical-technical-stiff.toml`: the farm's step with the
-/// contact problem solved further, measured beside the default too.
-const STIFF: &str = include_str!("../../experiments/physical-technical-stiff.toml");
-/// `experiments/physical-technical-firm.toml`: the farm's step with stops
-/// that hold within it, measured beside the default too.
-const FIRM: &str = include_str!("../../experiments/physical-technical-firm.toml");
-/// `experiments/physical-technical-arms.toml`: the firm physics with the
-/// arms swinging (and so not welded), measured beside the default too.
-const ARMS: &str = include_str!("../../experiments/physical-technical-arms.toml");
+/// A shipped experiment file whose walk `bench sim` measures beside the
+/// default, as the file sets it.
+struct FileWalk {
+    /// The file's text.
+    text: &'static str,
+    /// Its key in the JSON output (`{key}_realtime_factor`,
+    /// `{key}_share_of_open_loop`).
+    key: &'static str,
+    /// Its name in the summary lines.
+    name: &'static str,
+    /// Its row's label.
+    label: &'static str,
+}
+
+/// The files `bench sim` measures, the converged first.
+const FILES: [FileWalk; 5] = [
+    // Converged physics with its fixed values.
+    FileWalk {
+        text: include_str!("../../experiments/physical-technical-converged.toml"),
+        key: "converged",
+        name: "converged",
+        label: "converged files: 10x2ms, no double support",
+    },
+    // The farm's step with the contact problem solved further.
+    FileWalk {
+        text: include_str!("../../experiments/physical-technical-stiff.toml"),
+        key: "stiff",
+        name: "stiff",
+        label: "stiff file: 2x10ms, pgs 32, its engine",
+    },
+    // The farm's step with stops that hold within it.
+    FileWalk {
+        text: include_str!("../../experiments/physical-technical-firm.toml"),
+        key: "firm",
+        name: "firm",
+        label: "firm file: 2x10ms, pgs 28, firm stops, 60Hz",
+    },
+    // The firm physics with the arms swinging (and so not welded).
+    FileWalk {
+        text: include_str!("../../experiments/physical-technical-arms.toml"),
+        key: "arms",
+        name: "arms",
+        label: "arms file: the firm file's, arms swinging",
+    },
+    // The arms file at 4 x 5 ms.
+    FileWalk {
+        text: include_str!("../../experiments/physical-technical-arms-5ms.toml"),
+        key: "arms_5ms",
+        name: "arms 5 ms",
+        label: "arms 5 ms file: the arms file's at 4x5ms",
+    },
+];
 
 /// The walk of a shipped experiment file, as the file sets it (its physics
 /// and its fixed values, with its expert set), measured like the others.
@@ -508,34 +548,10 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             rows.push(r);
         }
     }
-    rows.push(measure_file_walk(
-        CONVERGED,
-        "converged",
-        a.seconds,
-        "converged files: 10x2ms, no double support",
-    )?);
-    let converged = rows.len() - 1;
-    rows.push(measure_file_walk(
-        STIFF,
-        "stiff",
-        a.seconds,
-        "stiff file: 2x10ms, pgs 32, its engine",
-    )?);
-    let stiff = rows.len() - 1;
-    rows.push(measure_file_walk(
-        FIRM,
-        "firm",
-        a.seconds,
-        "firm file: 2x10ms, pgs 28, firm stops, 60Hz",
-    )?);
-    let firm = rows.len() - 1;
-    rows.push(measure_file_walk(
-        ARMS,
-        "arms",
-        a.seconds,
-        "arms file: the firm file's, arms swinging",
-    )?);
-    let arms = rows.len() - 1;
+    let first_file = rows.len();
+    for f in &FILES {
+        rows.push(measure_file_walk(f.text, f.key, a.seconds, f.label)?);
+    }
     let rtf = |r: &Row| r.sim_s / r.wall_s;
     let sps = |r: &Row| r.sim_s / CYCLE_S * f64::from(r.settings.substeps) / r.wall_s;
     let headline = rows
@@ -549,34 +565,20 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
     // The closed-loop walk's speed as a share of the open loop's, measured in
     // the same run at the default settings.
     let closed_share = rtf(closed) / rtf(headline);
-    let converged = &rows[converged];
-    let converged_share = rtf(converged) / rtf(headline);
-    let stiff = &rows[stiff];
-    let stiff_share = rtf(stiff) / rtf(headline);
-    let firm = &rows[firm];
-    let firm_share = rtf(firm) / rtf(headline);
-    let arms = &rows[arms];
-    let arms_share = rtf(arms) / rtf(headline);
+    let files: Vec<(&FileWalk, &Row)> = FILES.iter().zip(&rows[first_file..]).collect();
+    let converged = files[0].1;
     // What a physics step costs there against the default's: about the same,
     // so the converged walk's share follows its steps per cycle (docs/walk.md,
     // "Why no code speed-up meets the 80 % on converged physics").
     let converged_step_share = sps(converged) / sps(closed);
     if a.json {
-        let v = serde_json::json!({
+        let mut v = serde_json::json!({
             "realtime_factor": rtf(headline),
             "steps_per_second": sps(headline),
             "motion": "expert walk, type 0, default settings, one core",
             "closed_loop_realtime_factor": rtf(closed),
             "closed_loop_share_of_open_loop": closed_share,
-            "converged_realtime_factor": rtf(converged),
-            "converged_share_of_open_loop": converged_share,
             "converged_steps_per_second_share": converged_step_share,
-            "stiff_realtime_factor": rtf(stiff),
-            "stiff_share_of_open_loop": stiff_share,
-            "firm_realtime_factor": rtf(firm),
-            "firm_share_of_open_loop": firm_share,
-            "arms_realtime_factor": rtf(arms),
-            "arms_share_of_open_loop": arms_share,
             "rows": rows.iter().map(|r| serde_json::json!({
                 "settings": r.label,
                 "motion": r.motion,
@@ -589,6 +591,10 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
                 "fell": r.fell,
             })).collect::<Vec<_>>(),
         });
+        for (f, r) in &files {
+            v[format!("{}_realtime_factor", f.key)] = rtf(r).into();
+            v[format!("{}_share_of_open_loop", f.key)] = (rtf(r) / rtf(headline)).into();
+        }
         outln!("{v}");
     } else {
         outln!(
@@ -614,32 +620,22 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             rtf(closed),
             100.0 * closed_share
         );
-        outln!(
-            "closed-loop walk of the converged experiments: {:.1}x real time, {:.0} % of the open loop's at the default",
-            rtf(converged),
-            100.0 * converged_share
-        );
-        outln!(
-            "  per physics step: {:.2}x the default closed loop's steps/s, with {} steps per cycle against {}",
-            converged_step_share,
-            converged.settings.substeps,
-            closed.settings.substeps
-        );
-        outln!(
-            "closed-loop walk of the stiff experiment: {:.1}x real time, {:.0} % of the open loop's at the default",
-            rtf(stiff),
-            100.0 * stiff_share
-        );
-        outln!(
-            "closed-loop walk of the firm experiment: {:.1}x real time, {:.0} % of the open loop's at the default",
-            rtf(firm),
-            100.0 * firm_share
-        );
-        outln!(
-            "closed-loop walk of the arms experiment: {:.1}x real time, {:.0} % of the open loop's at the default",
-            rtf(arms),
-            100.0 * arms_share
-        );
+        for (f, r) in &files {
+            outln!(
+                "closed-loop walk of the {} experiment: {:.1}x real time, {:.0} % of the open loop's at the default",
+                f.name,
+                rtf(r),
+                100.0 * rtf(r) / rtf(headline)
+            );
+            if f.key == "converged" {
+                outln!(
+                    "  per physics step: {:.2}x the default closed loop's steps/s, with {} steps per cycle against {}",
+                    converged_step_share,
+                    converged.settings.substeps,
+                    closed.settings.substeps
+                );
+            }
+        }
     }
     Ok(())
 }
