@@ -541,28 +541,13 @@ mod tests {
     /// 5.779 m, 1.09 ×).
     #[test]
     fn placing_the_feet_against_the_turn_keeps_a_fast_walk_to_its_plan() {
-        let (_, physics, mut p) = shipped(include_str!(
+        let (_, physics, expert) = shipped(include_str!(
             "../../../experiments/physical-technical-arms.toml"
         ));
-        for (name, v) in [
-            ("ThighRelHip2_Z", -0.0707),
-            ("ratio_flexion", 0.7265),
-            ("long_offset_MidAnkles_2_Torso_Init", 0.0120),
-            ("height_lift", 0.0371),
-            ("xlength_step_max", 0.0914),
-        ] {
-            p.set(protocol::params::find(name).unwrap().param, v)
-                .unwrap();
-        }
-        let batch = Batch {
-            seed0: 777,
-            n: 20,
-            threads: 2,
-        };
-        let planned = trial::planned_travel_m(0, &p, 10.0, closed()).unwrap();
-        let in_torso = summary(&run_many(0, &p, batch, 10.0, physics, closed()).unwrap());
+        let mut p = with_values(expert, &ARMS_OPTIM2);
+        let (in_torso, planned) = twenty_from_777(&p, physics);
         p.set(protocol::params::Param::TurnPlace, 1.0).unwrap();
-        let in_walk = summary(&run_many(0, &p, batch, 10.0, physics, closed()).unwrap());
+        let (in_walk, _) = twenty_from_777(&p, physics);
         println!("planned {planned:.3} m; torso's frame {in_torso:?}; walk's {in_walk:?}");
         assert!(in_torso.1 > 1.12 * planned, "torso's frame: {in_torso:?}");
         assert!(in_walk.0 >= 0.9, "walk's frame: {in_walk:?}");
@@ -570,6 +555,37 @@ mod tests {
             (in_walk.1 - planned).abs() <= 0.1 * planned,
             "walk's frame: {in_walk:?}"
         );
+    }
+
+    /// The arms file's experiment-2 Optim.2 at seed 1 (session 23's run).
+    const ARMS_OPTIM2: [(&str, f64); 5] = [
+        ("ThighRelHip2_Z", -0.0707),
+        ("ratio_flexion", 0.7265),
+        ("long_offset_MidAnkles_2_Torso_Init", 0.0120),
+        ("height_lift", 0.0371),
+        ("xlength_step_max", 0.0914),
+    ];
+
+    /// `p` with these values, by name.
+    fn with_values(mut p: ParamValues, values: &[(&str, f64)]) -> ParamValues {
+        for (name, v) in values {
+            p.set(protocol::params::find(name).unwrap().param, *v)
+                .unwrap();
+        }
+        p
+    }
+
+    /// 20 trials of `p` from seed 777 with `physics`: (s, mx, my) and the
+    /// plan's travel, m.
+    fn twenty_from_777(p: &ParamValues, physics: SimSettings) -> ((f64, f64, f64), f64) {
+        let batch = Batch {
+            seed0: 777,
+            n: 20,
+            threads: 2,
+        };
+        let walked = summary(&run_many(0, p, batch, 10.0, physics, closed()).unwrap());
+        let planned = trial::planned_travel_m(0, p, 10.0, closed()).unwrap();
+        (walked, planned)
     }
 
     /// Arm swing steadies a fast walk that pivots about its stance foot
@@ -581,20 +597,20 @@ mod tests {
     /// its shoulders then moving against the legs.
     #[test]
     fn swinging_arms_steady_a_fast_walk_that_falls_without_them() {
-        let (_, physics, mut p) = shipped(include_str!(
+        let (_, physics, expert) = shipped(include_str!(
             "../../../experiments/physical-technical-firm.toml"
         ));
-        for (name, v) in [
-            ("ThighRelHip2_Z", -0.0798),
-            ("ratio_flexion", 0.8213),
-            ("long_offset_MidAnkles_2_Torso_Init", 0.011),
-            ("height_lift", 0.0525),
-            ("step_period", 0.15),
-            ("xlength_step_max", 0.07),
-        ] {
-            p.set(protocol::params::find(name).unwrap().param, v)
-                .unwrap();
-        }
+        let p = with_values(
+            expert,
+            &[
+                ("ThighRelHip2_Z", -0.0798),
+                ("ratio_flexion", 0.8213),
+                ("long_offset_MidAnkles_2_Torso_Init", 0.011),
+                ("height_lift", 0.0525),
+                ("step_period", 0.15),
+                ("xlength_step_max", 0.07),
+            ],
+        );
         let batch = Batch {
             seed0: 3,
             n: 10,
@@ -733,24 +749,7 @@ mod tests {
         assert_eq!(physics.substeps, 4);
         walks_at_pace_within_the_stops(&expert, 30, physics);
         let window = within_two_degrees_over(&corners_of_l(&exp, true), physics);
-        let mut p = expert;
-        for (name, v) in [
-            ("ThighRelHip2_Z", -0.0707),
-            ("ratio_flexion", 0.7265),
-            ("long_offset_MidAnkles_2_Torso_Init", 0.0120),
-            ("height_lift", 0.0371),
-            ("xlength_step_max", 0.0914),
-        ] {
-            p.set(protocol::params::find(name).unwrap().param, v)
-                .unwrap();
-        }
-        let batch = Batch {
-            seed0: 777,
-            n: 20,
-            threads: 2,
-        };
-        let planned = trial::planned_travel_m(0, &p, 10.0, closed()).unwrap();
-        let (s, mx, _) = summary(&run_many(0, &p, batch, 10.0, physics, closed()).unwrap());
+        let ((s, mx, _), planned) = twenty_from_777(&with_values(expert, &ARMS_OPTIM2), physics);
         println!("L {window:.2}°; optimum s {s}, {mx:.3} m of {planned:.3} m");
         assert!(s >= 0.9, "s {s}");
         assert!(
