@@ -19,6 +19,11 @@
 //!   rate too ([`Gains`]); measured, they did not help this robot and are 0.
 //! - **Foot force sensors** weigh the stance corrections: each leg's share is
 //!   its share of the sensed vertical load, so a foot in the air gets none.
+//! - **Torso turn** about the vertical, the gyro's yaw rate integrated and
+//!   leaking over [`TURN_FILTER_S`]: with `turn_place` (0 by default) the
+//!   feet are placed against it, so a turned torso lands them where the
+//!   plan has them in the walk's frame (docs/walk.md, "Where the optima's
+//!   distance beyond their plan comes from").
 //!
 //! # Engine constants (values and why)
 //! Each value was measured on the expert set (20 noisy trials, seed 3) against
@@ -36,12 +41,15 @@
 //!   with s 0.98 over 100 trials; 0 → 3.81 m.
 //!
 //! The step period, double support, CoM height, the stance hip-roll
-//! compensation, the arm swing and the hip- and ankle-pitch gains are
-//! registry parameters too (`step_period`, `double_support`,
-//! `com_above_hip`, `hip_roll_comp`, `arm_swing`, `hip_pitch_gain`,
-//! `ankle_pitch_gain`): a set that gives one replaces the constant here.
+//! compensation, the arm swing, the hip- and ankle-pitch gains and the
+//! turn's share are registry parameters too (`step_period`,
+//! `double_support`, `com_above_hip`, `hip_roll_comp`, `arm_swing`,
+//! `hip_pitch_gain`, `ankle_pitch_gain`, `turn_place`): a set that gives
+//! one replaces the constant here.
 //! The arms configuration (`experiments/physical-technical-arms.toml`)
-//! swings the arms: docs/walk.md, "Swinging arms at the league's pace".
+//! swings the arms: docs/walk.md, "Swinging arms at the league's pace"; at
+//! 4 × 5 ms (`physical-technical-arms-5ms.toml`) its walks keep to their
+//! plan ("The arms at 4 × 5 ms").
 //! The stiff configuration
 //! (`experiments/physical-technical-stiff.toml`, 32 PGS iterations) fixes
 //! 0.19 s, 0, 0.05 m, −0.75 and 0.3: with these constants the expert set
