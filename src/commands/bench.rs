@@ -400,12 +400,18 @@ struct FileWalk {
     /// The file's text.
     text: &'static str,
     /// Its key in the JSON output (`{key}_realtime_factor`,
-    /// `{key}_share_of_open_loop`).
+    /// `{key}_share_of_open_loop`); with spaces for underscores, its name in
+    /// the summary lines and errors.
     key: &'static str,
-    /// Its name in the summary lines.
-    name: &'static str,
     /// Its row's label.
     label: &'static str,
+}
+
+impl FileWalk {
+    /// Its name in the summary lines and errors.
+    fn name(&self) -> String {
+        self.key.replace('_', " ")
+    }
 }
 
 /// The files `bench sim` measures, the converged first.
@@ -414,44 +420,39 @@ const FILES: [FileWalk; 5] = [
     FileWalk {
         text: include_str!("../../experiments/physical-technical-converged.toml"),
         key: "converged",
-        name: "converged",
         label: "converged files: 10x2ms, no double support",
     },
     // The farm's step with the contact problem solved further.
     FileWalk {
         text: include_str!("../../experiments/physical-technical-stiff.toml"),
         key: "stiff",
-        name: "stiff",
         label: "stiff file: 2x10ms, pgs 32, its engine",
     },
     // The farm's step with stops that hold within it.
     FileWalk {
         text: include_str!("../../experiments/physical-technical-firm.toml"),
         key: "firm",
-        name: "firm",
         label: "firm file: 2x10ms, pgs 28, firm stops, 60Hz",
     },
     // The firm physics with the arms swinging (and so not welded).
     FileWalk {
         text: include_str!("../../experiments/physical-technical-arms.toml"),
         key: "arms",
-        name: "arms",
         label: "arms file: the firm file's, arms swinging",
     },
     // The arms file at 4 x 5 ms.
     FileWalk {
         text: include_str!("../../experiments/physical-technical-arms-5ms.toml"),
         key: "arms_5ms",
-        name: "arms 5 ms",
         label: "arms 5 ms file: the arms file's at 4x5ms",
     },
 ];
 
 /// The walk of a shipped experiment file, as the file sets it (its physics
 /// and its fixed values, with its expert set), measured like the others.
-fn measure_file_walk(text: &str, what: &str, seconds: f64, label: &str) -> Result<Row, Failure> {
-    let bad = |e: String| Failure::Job(anyhow!("the {what} experiment file: {e}"));
-    let file = protocol::Experiment::from_toml(text).map_err(|e| bad(e.to_string()))?;
+fn measure_file_walk(f: &FileWalk, seconds: f64) -> Result<Row, Failure> {
+    let bad = |e: String| Failure::Job(anyhow!("the {} experiment file: {e}", f.name()));
+    let file = protocol::Experiment::from_toml(f.text).map_err(|e| bad(e.to_string()))?;
     let params = ParamValues::from_named(&file.full_params(&file.expert_values()))
         .map_err(|e| bad(e.to_string()))?;
     let mut r = measure_walk(
@@ -460,7 +461,7 @@ fn measure_file_walk(text: &str, what: &str, seconds: f64, label: &str) -> Resul
         file.walk,
         &params,
     )?;
-    r.label = label.into();
+    r.label = f.label.into();
     Ok(r)
 }
 
@@ -550,7 +551,7 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
     }
     let first_file = rows.len();
     for f in &FILES {
-        rows.push(measure_file_walk(f.text, f.key, a.seconds, f.label)?);
+        rows.push(measure_file_walk(f, a.seconds)?);
     }
     let rtf = |r: &Row| r.sim_s / r.wall_s;
     let sps = |r: &Row| r.sim_s / CYCLE_S * f64::from(r.settings.substeps) / r.wall_s;
@@ -623,7 +624,7 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
         for (f, r) in &files {
             outln!(
                 "closed-loop walk of the {} experiment: {:.1}x real time, {:.0} % of the open loop's at the default",
-                f.name,
+                f.name(),
                 rtf(r),
                 100.0 * rtf(r) / rtf(headline)
             );

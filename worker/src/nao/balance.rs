@@ -210,7 +210,10 @@ impl Balance {
             leg[2] = w * g.hip_pitch * pitch;
             leg[1] = w * (g.hip_roll * roll + g.hip_roll_rate * gx);
         }
-        c.turn = g.turn_place * self.turn;
+        // Off, exactly 0 whatever the estimate (never 0 × a non-finite turn).
+        if g.turn_place != 0.0 {
+            c.turn = g.turn_place * self.turn;
+        }
         c
     }
 }

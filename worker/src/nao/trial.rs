@@ -342,12 +342,15 @@ pub fn run_observed(
             Some(b) => {
                 let sensed = noisy(&perception, &mut rng);
                 let c = b.update(&sensed, CYCLE_S);
-                if c.turn == 0.0 {
-                    Some(gait.corrected(&q_next, &c))
+                // The plan's targets, or with the feet placed against the turn.
+                let turned;
+                let planned = if c.turn == 0.0 {
+                    &q_next
                 } else {
-                    let q = gait.targets_turned(&rest, t + CYCLE_S, c.turn);
-                    Some(gait.corrected(&q, &c))
-                }
+                    turned = gait.targets_turned(&rest, t + CYCLE_S, c.turn);
+                    &turned
+                };
+                Some(gait.corrected(planned, &c))
             }
         };
         let cmd: Vec<f64> = perception
