@@ -434,7 +434,8 @@ pub struct TrialArgs {
     /// `speed_cap_scale`, `speed_cap_joints` (name suffixes, comma-separated:
     /// the joints the scale applies to), `max_torque_nm`, `contact_hz`,
     /// `contact_prediction_m`, `friction_scale`: the trial's drawn ground
-    /// friction times this): to measure which limit stops a walk
+    /// friction times this, `weld_arm_rest=1`: swinging arms move at the
+    /// shoulder pitches only): to measure which limit stops a walk
     /// (docs/walk.md); farm trials always use the league's.
     #[arg(long, value_name = "KEY=VALUE", hide = true)]
     pub limit: Vec<String>,

@@ -488,10 +488,12 @@ fn move_limit(settings: &mut SimSettings, model: &NaoModel, kv: &str) -> Result<
         "contact_hz" => settings.contact_hz = v.min(10_000.0),
         "contact_prediction_m" => settings.contact_prediction_m = v.min(0.1),
         "friction_scale" => settings.friction_scale = v.min(100.0),
+        "weld_arm_rest" if v == 1.0 => settings.weld_arm_rest = true,
         _ => {
             return Err(Failure::Usage(anyhow!(
-                "--limit: unknown limit `{k}` (speed_cap_scale, speed_cap_joints, \
-                 max_torque_nm, contact_hz, contact_prediction_m, friction_scale)"
+                "--limit: unknown limit `{kv}` (speed_cap_scale, speed_cap_joints, \
+                 max_torque_nm, contact_hz, contact_prediction_m, friction_scale, \
+                 weld_arm_rest=1)"
             )))
         }
     }

@@ -63,6 +63,11 @@ pub struct SimSettings {
     /// a multibody's cost grows faster than its degrees of freedom, and the
     /// walk holds the head still).
     pub weld_head: bool,
+    /// With `weld_head`, weld the arm joints the walk holds still too (the
+    /// shoulder rolls and elbows): only the shoulder pitches swing, each
+    /// carrying its whole arm as one body (20 degrees of freedom instead
+    /// of 26).
+    pub weld_arm_rest: bool,
     /// Motor damping (velocity constraint stiffness), N·m·s/rad.
     pub motor_damping: f64,
     /// Passive damping in every hinge, N·m·s/rad (multibody joints only).
@@ -116,6 +121,7 @@ impl Default for SimSettings {
             contact_prediction_m: 0.005,
             weld_upper_body: true,
             weld_head: false,
+            weld_arm_rest: false,
             motor_damping: 1000.0,
             joint_damping: 0.0,
             armature_kg_m2: physics.armature_kg_m2,
@@ -132,6 +138,15 @@ impl Default for SimSettings {
 }
 
 impl SimSettings {
+    /// Whether these settings weld the hinge named `name` at its start angle.
+    #[must_use]
+    pub fn welds(&self, name: &str) -> bool {
+        is_upper_body_joint(name)
+            && (self.weld_upper_body
+                || self.weld_head
+                    && (!is_arm_joint(name) || self.weld_arm_rest && !is_shoulder_pitch(name)))
+    }
+
     /// The defaults with an experiment's `[physics]` counts.
     #[must_use]
     pub fn with_physics(physics: &protocol::Physics) -> Self {
@@ -234,8 +249,10 @@ struct Hinge {
 enum Place {
     /// Its own rigid body.
     Own(RigidBodyHandle),
-    /// Welded into the torso with this motion relative to the torso's.
-    Welded(Iso),
+    /// Welded into its nearest ancestor with a body of its own (the host, a
+    /// body index: the torso for the head and for arms welded whole) with
+    /// this motion relative to the host's.
+    Welded { host: usize, rel: Iso },
 }
 
 /// A running simulation of one robot.
@@ -296,10 +313,10 @@ fn shape_collider(shape: Shape) -> ColliderBuilder {
     }
 }
 
-/// Pose, in the torso body's frame, of a body welded with relative motion `rel`.
-fn welded_offset(rel: &Iso, centre: [f64; 3], torso_centre: [f64; 3]) -> Iso {
+/// Pose, in its host body's frame, of a body welded with relative motion `rel`.
+fn welded_offset(rel: &Iso, centre: [f64; 3], host_centre: [f64; 3]) -> Iso {
     let c = rel * nalgebra::Point3::from(centre);
-    let t = nalgebra::Point3::from(torso_centre);
+    let t = nalgebra::Point3::from(host_centre);
     Iso::from_parts(nalgebra::Translation3::from(c - t), rel.rotation)
 }
 
@@ -307,6 +324,12 @@ fn welded_offset(rel: &Iso, centre: [f64; 3], torso_centre: [f64; 3]) -> Iso {
 #[must_use]
 pub fn is_upper_body_joint(name: &str) -> bool {
     name.starts_with("he") || is_arm_joint(name)
+}
+
+/// Whether a joint is a shoulder's pitch (the one a swinging arm swings).
+#[must_use]
+pub fn is_shoulder_pitch(name: &str) -> bool {
+    name == "lae1" || name == "rae1"
 }
 
 /// Whether a joint is one of the arms' (shoulders, elbows).
@@ -388,36 +411,41 @@ impl Sim {
             Some(gbody),
         );
 
-        let welded: Vec<bool> = {
+        // Each body's host: itself, or for a welded body its nearest
+        // ancestor with a body of its own (parents come before children).
+        let hosts: Vec<usize> = {
             let pj = kinematics::parent_joints(model);
-            pj.iter()
-                .map(|j| {
-                    j.is_some_and(|j| {
-                        let name = &model.joints[j].name;
-                        is_upper_body_joint(name)
-                            && (settings.weld_upper_body
-                                || settings.weld_head && !is_arm_joint(name))
-                    })
-                })
-                .collect()
+            let mut hosts = Vec::with_capacity(model.bodies.len());
+            for (i, j) in pj.iter().enumerate() {
+                let host = match j {
+                    Some(j) if settings.welds(&model.joints[*j].name) => {
+                        hosts[model.joints[*j].parent]
+                    }
+                    _ => i,
+                };
+                hosts.push(host);
+            }
+            hosts
         };
-        // Bodies.
+        if hosts[0] != 0 {
+            return Err(SimError::Settings("the torso cannot be welded".into()));
+        }
+        // Bodies, each host's mass gathered in body order (the torso's own
+        // first, as before arms could be welded in part).
+        let mut masses = vec![MassProperties::default(); model.bodies.len()];
         let mut places = Vec::with_capacity(model.bodies.len());
         let mut own_bodies = Vec::new();
-        let torso_motion = motions[0];
-        let mut torso_mass = MassProperties::default();
         for (i, b) in model.bodies.iter().enumerate() {
             let local = MassProperties::new(Vec3::ZERO, b.mass_kg as f32, v3(b.inertia));
-            if welded[i] {
-                let rel = torso_motion.inverse() * motions[i];
-                let offset = welded_offset(&rel, b.centre, model.bodies[0].centre);
-                torso_mass += local.transform_by(&to_pose(&offset));
-                places.push(Place::Welded(rel));
+            let host = hosts[i];
+            if host != i {
+                let rel = motions[host].inverse() * motions[i];
+                let offset = welded_offset(&rel, b.centre, model.bodies[host].centre);
+                masses[host] += local.transform_by(&to_pose(&offset));
+                places.push(Place::Welded { host, rel });
                 continue;
             }
-            if i == 0 {
-                torso_mass += local;
-            }
+            masses[i] += local;
             let g = motions[i] * nalgebra::Translation3::from(Vector3::from(b.centre));
             let handle = world.insert_body(
                 RigidBodyBuilder::dynamic()
@@ -435,7 +463,13 @@ impl Sim {
         let Place::Own(torso) = places[0] else {
             return Err(SimError::Settings("the torso cannot be welded".into()));
         };
-        world.bodies[torso].set_additional_mass_properties(torso_mass, false);
+        for (i, place) in places.iter().enumerate() {
+            // A body that hosts none keeps the mass it was built with.
+            let hosts_some = i == 0 || hosts.iter().enumerate().any(|(k, &h)| h == i && k != i);
+            if let (Place::Own(h), true) = (place, hosts_some) {
+                world.bodies[*h].set_additional_mass_properties(masses[i], false);
+            }
+        }
         // Colliders.
         let mut feet = [Vec::new(), Vec::new()];
         for (i, b) in model.bodies.iter().enumerate() {
@@ -444,10 +478,15 @@ impl Sim {
             }
             let (parent, offset) = match &places[i] {
                 Place::Own(h) => (*h, Pose::IDENTITY),
-                Place::Welded(rel) => (
-                    torso,
-                    to_pose(&welded_offset(rel, b.centre, model.bodies[0].centre)),
-                ),
+                Place::Welded { host, rel } => {
+                    let Place::Own(h) = places[*host] else {
+                        return Err(SimError::Settings("a welded host".into()));
+                    };
+                    (
+                        h,
+                        to_pose(&welded_offset(rel, b.centre, model.bodies[*host].centre)),
+                    )
+                }
             };
             let h = world.insert_collider(
                 shape_collider(b.shape)
@@ -826,15 +865,16 @@ impl Sim {
     /// replays and checks.
     #[must_use]
     pub fn body_motions(&self) -> Vec<Iso> {
-        let torso = self.motion_of(self.torso, 0);
-        self.places
-            .iter()
-            .enumerate()
-            .map(|(i, p)| match p {
+        let mut out: Vec<Iso> = Vec::with_capacity(self.places.len());
+        for (i, p) in self.places.iter().enumerate() {
+            let m = match p {
                 Place::Own(h) => self.motion_of(*h, i),
-                Place::Welded(rel) => torso * rel,
-            })
-            .collect()
+                // Hosts come before the bodies welded to them.
+                Place::Welded { host, rel } => out[*host] * rel,
+            };
+            out.push(m);
+        }
+        out
     }
 
     fn motion_of(&self, h: RigidBodyHandle, body: usize) -> Iso {
@@ -937,26 +977,47 @@ mod tests {
 
     #[test]
     fn rapier_pose_matches_forward_kinematics() {
-        for (weld, weld_head, impulse) in [
-            (false, false, false),
-            (false, true, false),
-            (true, false, false),
-            (true, false, true),
+        let arm_rest = ["he1", "he2", "lae2", "lae3", "lae4", "rae2", "rae3", "rae4"];
+        for (weld, weld_head, weld_arm_rest, impulse) in [
+            (false, false, false, false),
+            (false, true, false, false),
+            (false, true, true, false),
+            (true, false, false, false),
+            (true, false, false, true),
         ] {
             let m = model(4);
             let q = standing_angles(&m);
             let settings = SimSettings {
                 weld_upper_body: weld,
                 weld_head,
+                weld_arm_rest,
                 impulse_joints: impulse,
                 ..SimSettings::default()
             };
-            let sim = Sim::new(&m, settings, &Start::upright(q.clone())).unwrap();
+            let mut sim = Sim::new(&m, settings, &Start::upright(q.clone())).unwrap();
             for (j, joint) in m.joints.iter().enumerate() {
-                let welded = is_upper_body_joint(&joint.name)
-                    && (weld || weld_head && !is_arm_joint(&joint.name));
+                let welded = if weld_arm_rest {
+                    arm_rest.contains(&joint.name.as_str())
+                } else {
+                    is_upper_body_joint(&joint.name)
+                        && (weld || weld_head && !is_arm_joint(&joint.name))
+                };
+                assert_eq!(settings.welds(&joint.name), welded, "{}", joint.name);
                 assert_eq!(sim.is_motorised(j), !welded, "{}", joint.name);
             }
+            // Welding moves mass onto its host, never loses any.
+            let robot: f64 = m.bodies.iter().map(|b| b.mass_kg).sum();
+            let world = &mut sim.world;
+            let simulated: f64 = sim
+                .own_bodies
+                .iter()
+                .map(|h| {
+                    let body = &mut world.bodies[*h];
+                    body.recompute_mass_properties_from_colliders(&world.colliders);
+                    f64::from(body.mass())
+                })
+                .sum();
+            assert!((simulated - robot).abs() < 1e-4, "{simulated} {robot}");
             let ours = sim.body_motions();
             let angles = sim.joint_angles();
             // Impulse joints read angles back from f32 body rotations.

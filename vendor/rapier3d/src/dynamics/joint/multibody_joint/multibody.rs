@@ -47,6 +47,55 @@ fn concat_rb_mass_matrix(mass: Vector, inertia: Real) -> SMatrix<Real, SPATIAL_D
     result
 }
 
+/// The generalized coordinates link `i`'s body jacobian can be non-zero on: the
+/// DoF ranges `(start, len)` of the links from the root to `i`, sorted and merged
+/// where contiguous. Every other column of that jacobian is exactly zero.
+fn chain_dof_ranges(links: &MultibodyLinkVec, i: usize, out: &mut Vec<(usize, usize)>) {
+    out.clear();
+    let mut curr = Some(i);
+    while let Some(id) = curr {
+        let link = &links[id];
+        let n = link.joint.ndofs();
+        if n > 0 {
+            out.push((link.assembly_id, n));
+        }
+        curr = link.parent_id();
+    }
+    out.sort_unstable();
+    let mut merged = 0;
+    for k in 0..out.len() {
+        if merged > 0 && out[merged - 1].0 + out[merged - 1].1 == out[k].0 {
+            out[merged - 1].1 += out[k].1;
+        } else {
+            out[merged] = out[k];
+            merged += 1;
+        }
+    }
+    out.truncate(merged);
+}
+
+/// `out += rhs^T * mid * rhs` where `rhs` is zero outside the columns `ranges`:
+/// the same arithmetic, entry for entry, as nalgebra's `quadform(1.0, mid, rhs,
+/// 1.0)`, without the products of zeros (whose sums leave `out` unchanged).
+fn sparse_quadform(
+    out: &mut DMatrix<Real>,
+    mid: &SMatrix<Real, SPATIAL_DIM, SPATIAL_DIM>,
+    rhs: &Jacobian<Real>,
+    ranges: &[(usize, usize)],
+) {
+    let mut work = SVector::<Real, SPATIAL_DIM>::zeros();
+    for &(cs, cl) in ranges {
+        for j in cs..cs + cl {
+            work.gemv(1.0, mid, &rhs.column(j), 0.0);
+            for &(rs, rl) in ranges {
+                out.column_mut(j)
+                    .rows_mut(rs, rl)
+                    .gemv_tr(1.0, &rhs.columns(rs, rl), &work, 1.0);
+            }
+        }
+    }
+}
+
 #[cfg(feature = "dim3")]
 fn concat_rb_mass_matrix(
     mass: Vector,
@@ -842,6 +891,7 @@ impl Multibody {
         }
 
         let mut curr_assembly_id = 0;
+        let mut chain = Vec::new();
 
         for i in 0..self.links.len() {
             let link = &self.links[i];
@@ -887,10 +937,19 @@ impl Multibody {
             let rb_mass_matrix_wo_gyro = concat_rb_mass_matrix(rb_mass, rb_inertia.into());
             #[allow(clippy::useless_conversion)] // Needed in 3D, no-op in 2D
             let rb_mass_matrix = concat_rb_mass_matrix(rb_mass, augmented_inertia.into());
-            self.augmented_mass
-                .quadform(1.0, &rb_mass_matrix_wo_gyro, body_jacobian, 1.0);
-            self.acc_augmented_mass
-                .quadform(1.0, &rb_mass_matrix, body_jacobian, 1.0);
+            chain_dof_ranges(&self.links, i, &mut chain);
+            sparse_quadform(
+                &mut self.augmented_mass,
+                &rb_mass_matrix_wo_gyro,
+                body_jacobian,
+                &chain,
+            );
+            sparse_quadform(
+                &mut self.acc_augmented_mass,
+                &rb_mass_matrix,
+                body_jacobian,
+                &chain,
+            );
 
             /*
              *
@@ -1017,8 +1076,19 @@ impl Multibody {
                 i_coriolis_dt_w.gemm(dt, &mat_to_na(rb_inertia), coriolis_w, 0.0);
             }
 
-            self.acc_augmented_mass
-                .gemm_tr(1.0, rb_j, &self.i_coriolis_dt, 1.0);
+            // `acc_augmented_mass += rb_j^T * i_coriolis_dt`, on the link's chain only:
+            // both factors are zero outside it.
+            for &(cs, cl) in &chain {
+                for j in cs..cs + cl {
+                    let rhs = self.i_coriolis_dt.column(j);
+                    for &(rs, rl) in &chain {
+                        self.acc_augmented_mass
+                            .column_mut(j)
+                            .rows_mut(rs, rl)
+                            .gemv_tr(1.0, &rb_j.columns(rs, rl), &rhs, 1.0);
+                    }
+                }
+            }
         }
 
         /*
