@@ -442,6 +442,10 @@ fn a_nao_report_has_an_animated_replay_of_expert_optim1_and_optim2() {
             );
             assert!(md.contains("| mx / planned |"), "{md}");
             assert!(md.contains("| mx by sliding (m) |"), "{md}");
+            // Where its feet land against the legs' aim, over its touchdowns.
+            assert!(md.contains("| landed beyond aim per step (mm) |"), "{md}");
+            assert!(w["touchdowns"].as_u64().unwrap() > 0, "{w}");
+            assert!(w["overreach_m"].as_f64().unwrap().is_finite(), "{w}");
             // The expert's distance is steps: it neither slides nor lunges.
             assert!(
                 w["sliding_m"].as_f64().unwrap().abs() < 0.05 * mx

@@ -562,6 +562,11 @@ fn table_text(exp: &Experiment, rows: &[Row], trials: u32) -> (String, String) {
             cell(r.footwork.map(|w| w.sliding_m))
         });
         line("mx by lean (m)", &|r| cell(r.footwork.map(|w| w.lean_m)));
+        line("landed beyond aim per step (mm)", &|r| {
+            r.footwork
+                .filter(|w| w.touchdowns > 0)
+                .map_or("–".into(), |w| format!("{:+.1}", w.overreach_m * 1000.0))
+        });
     }
     let json: Vec<serde_json::Value> = rows
         .iter()
@@ -761,6 +766,11 @@ fn index_html(
             r.footwork.map_or("–".into(), |w| {
                 format!("{:.3} / {:.3} / {:.3}", w.stepping_m, w.sliding_m, w.lean_m)
             })
+        });
+        line("landed beyond aim per step (mm)", &|r| {
+            r.footwork
+                .filter(|w| w.touchdowns > 0)
+                .map_or("–".into(), |w| format!("{:+.1}", w.overreach_m * 1000.0))
         });
     }
     h += "</table>\n";

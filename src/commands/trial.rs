@@ -207,6 +207,13 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
                 w.lean_m,
                 w.plants
             );
+            if w.touchdowns > 0 {
+                outln!(
+                    "the feet land {:+.1} mm beyond the legs' aim per step ({} touchdowns per trial)",
+                    w.overreach_m * 1000.0,
+                    w.touchdowns
+                );
+            }
         }
         if diverged > 0 {
             outln!("{diverged} of the falls were the physics diverging (counted as falls, no distance)");

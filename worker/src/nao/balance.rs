@@ -887,6 +887,54 @@ mod tests {
         }
     }
 
+    /// Where experiment 1's optima at 4 × 5 ms walk beyond their plan
+    /// (docs/walk.md, "Why experiment 1's optima step beyond their plan"): their
+    /// legs land spread wider than the servos were steered to. On the
+    /// longest thighs its CLOP chose (ThighRelHip2_Z −0.0956, the arms file
+    /// at 4 × 5 ms) each landing foot is more than 8 mm further ahead than
+    /// its targets put it (measured +13.0 mm, 20 trials), and those landings
+    /// account for the distance beyond the plan within a third (measured
+    /// 59 × 13.0 mm = 0.77 m of 0.63 m); the expert's land within 5 mm of
+    /// their aim (measured −2.6 mm) and it walks within 10 % of its plan.
+    #[test]
+    fn long_thighs_walk_past_their_plan_by_landing_wider_than_aimed() {
+        let (_, physics, expert) =
+            shipped(include_str!("../../../experiments/physical-arms-5ms.toml"));
+        let long = with_values(expert, &[("ThighRelHip2_Z", -0.0956)]);
+        let batch = Batch {
+            seed0: 777,
+            n: 10,
+            threads: 2,
+        };
+        for (p, wide) in [(&long, true), (&expert, false)] {
+            let ts = run_many(0, p, batch, 10.0, physics, closed()).unwrap();
+            let planned = trial::planned_travel_m(0, p, 10.0, closed()).unwrap();
+            let (s, mx, _) = summary(&ts);
+            let w = crate::nao::footwork::Footwork::mean(
+                ts.iter()
+                    .filter(|t| !t.measurement.fell)
+                    .map(|t| &t.footwork),
+            )
+            .unwrap();
+            let beyond = mx - planned;
+            let landed = f64::from(w.touchdowns) * w.overreach_m;
+            println!("wide {wide}: s {s}, {mx:.3} of {planned:.3} m, {w:?}");
+            assert!(s >= 0.9, "s {s}");
+            assert!(w.touchdowns >= 40, "{w:?}");
+            if wide {
+                assert!(w.overreach_m > 0.008, "{w:?}");
+                assert!(beyond > 0.1 * planned, "{mx} of {planned}");
+                assert!(
+                    (landed - beyond).abs() < beyond / 3.0,
+                    "landings {landed:.3} m, beyond the plan {beyond:.3} m"
+                );
+            } else {
+                assert!(w.overreach_m.abs() < 0.005, "{w:?}");
+                assert!(beyond.abs() < 0.1 * planned, "{mx} of {planned}");
+            }
+        }
+    }
+
     /// The split tells sliding and lunging apart from steps. On the league's
     /// floor the expert walk (the farm's physics) slides and leans by under
     /// 5 cm (measured −0.001 m and −0.028 m over 10 trials); with the ground's

@@ -12,12 +12,24 @@
 //! the simulation's ground truth at the end of each 20 ms cycle; the terms
 //! sum to the torso's advance over the cycles read. Reads only: it must not
 //! change a trial's bits.
+//!
+//! Stepping further than planned has a cause of its own: legs that land
+//! spread wider (or narrower) than their targets put them. At each
+//! touchdown the tracker compares the feet's distance along the torso's x
+//! axis from the forward kinematics of the true joint angles with that of
+//! the angles the servos were steered to (`overreach_m`).
 
+use super::kinematics::{self, Iso};
+use super::model::NaoModel;
 use super::sim::{Perception, Sim};
 
 /// Vertical load from which a foot counts as planted, N (a fifth of the
 /// robot's weight).
 pub const PLANTED_N: f64 = 10.0;
+
+/// Cycles a foot must have been in the air for its landing to count as a
+/// touchdown for `overreach_m` (60 ms: a bounce does not count).
+pub const AIR_CYCLES: u32 = 3;
 
 /// The torso's forward advance split by what the feet did, m. `stepping_m +
 /// sliding_m + lean_m` is the torso's advance along x over the trial.
@@ -32,6 +44,14 @@ pub struct Footwork {
     /// Times a foot came to be planted after it was not (a foot that
     /// bounces on landing counts again).
     pub plants: u32,
+    /// Mean over touchdowns: how much further ahead of the other foot the
+    /// landing foot is, along the torso's x axis, than the joint targets of
+    /// that cycle put it (forward kinematics of the true angles less that of
+    /// the targets), m. Positive: the legs land spread wider than aimed.
+    pub overreach_m: f64,
+    /// Touchdowns `overreach_m` averages (a landing after at least
+    /// [`AIR_CYCLES`] in the air).
+    pub touchdowns: u32,
 }
 
 impl Footwork {
@@ -40,12 +60,17 @@ impl Footwork {
     pub fn mean<'a>(trials: impl IntoIterator<Item = &'a Footwork>) -> Option<Footwork> {
         let mut sum = Footwork::default();
         let mut plants = 0u64;
+        let mut touchdowns = 0u64;
+        let mut reach = 0.0;
         let mut n = 0u32;
         for w in trials {
             sum.stepping_m += w.stepping_m;
             sum.sliding_m += w.sliding_m;
             sum.lean_m += w.lean_m;
             plants += u64::from(w.plants);
+            // Weighted by touchdowns: the mean over every touchdown.
+            reach += w.overreach_m * f64::from(w.touchdowns);
+            touchdowns += u64::from(w.touchdowns);
             n += 1;
         }
         (n > 0).then(|| {
@@ -55,6 +80,12 @@ impl Footwork {
                 sliding_m: sum.sliding_m / k,
                 lean_m: sum.lean_m / k,
                 plants: u32::try_from(plants / u64::from(n)).unwrap_or(u32::MAX),
+                overreach_m: if touchdowns > 0 {
+                    reach / touchdowns as f64
+                } else {
+                    0.0
+                },
+                touchdowns: u32::try_from(touchdowns / u64::from(n)).unwrap_or(u32::MAX),
             }
         })
     }
@@ -68,6 +99,11 @@ pub struct Tracker {
     planted: [bool; 2],
     offset0: f64,
     offset: f64,
+    /// Cycles each foot has been in the air.
+    air: [u32; 2],
+    /// The feet's bodies in the model, if it has both.
+    foot_bodies: Option<[usize; 2]>,
+    reach_sum: f64,
 }
 
 impl Tracker {
@@ -76,17 +112,23 @@ impl Tracker {
     pub fn new(sim: &Sim, p: &Perception) -> Self {
         let feet = sim.feet_centres();
         let offset = p.torso_position_m[0] - (feet[0][0] + feet[1][0]) / 2.0;
+        let model = sim.model();
+        let body = |name: &str| model.bodies.iter().position(|b| b.name == name);
         Self {
             work: Footwork::default(),
             feet,
             planted: [planted(p, 0), planted(p, 1)],
             offset0: offset,
             offset,
+            air: [0, 0],
+            foot_bodies: body("lfoot").zip(body("rfoot")).map(|(l, r)| [l, r]),
+            reach_sum: 0.0,
         }
     }
 
-    /// Adds one cycle, read after it.
-    pub fn fold(&mut self, sim: &Sim, p: &Perception) {
+    /// Adds one cycle, read after it; `targets` are the joint angles the
+    /// servos were steered to in it (model order).
+    pub fn fold(&mut self, sim: &Sim, p: &Perception, targets: &[f64]) {
         for (side, centre) in sim.feet_centres().iter().enumerate() {
             let now = planted(p, side);
             let was = self.planted[side];
@@ -98,7 +140,23 @@ impl Tracker {
             }
             if now && !was {
                 self.work.plants += 1;
+                if self.air[side] >= AIR_CYCLES {
+                    if let Some(feet) = self.foot_bodies {
+                        let model = sim.model();
+                        let landed = ahead(model, feet, side, &p.joint_angles_rad);
+                        let aimed = ahead(model, feet, side, targets);
+                        if (landed - aimed).is_finite() {
+                            self.reach_sum += landed - aimed;
+                            self.work.touchdowns += 1;
+                        }
+                    }
+                }
             }
+            self.air[side] = if now {
+                0
+            } else {
+                self.air[side].saturating_add(1)
+            };
             self.planted[side] = now;
             self.feet[side] = *centre;
         }
@@ -110,9 +168,25 @@ impl Tracker {
     pub fn footwork(&self) -> Footwork {
         Footwork {
             lean_m: self.offset - self.offset0,
+            overreach_m: if self.work.touchdowns > 0 {
+                self.reach_sum / f64::from(self.work.touchdowns)
+            } else {
+                0.0
+            },
             ..self.work
         }
     }
+}
+
+/// How far foot `side`'s centre is ahead of the other's along the torso's
+/// x axis with joint angles `q` (forward kinematics from the torso), m.
+fn ahead(model: &NaoModel, feet: [usize; 2], side: usize, q: &[f64]) -> f64 {
+    if q.len() != model.joints.len() {
+        return f64::NAN;
+    }
+    let g = kinematics::body_motions(model, q, &Iso::identity());
+    let x = |i: usize| kinematics::moved(&g[i], model.bodies[i].centre)[0];
+    x(feet[side]) - x(feet[1 - side])
 }
 
 fn planted(p: &Perception, side: usize) -> bool {

@@ -392,8 +392,9 @@ pub fn run_observed(
             Err(e) => return Err(e.into()),
         };
         overruns.fold(&model, &perception.joint_angles_rad, perception.time_s);
-        footwork.fold(&sim, &perception);
-        observe(&sim, &perception, aim.as_deref().unwrap_or(&q_next));
+        let steered = aim.as_deref().unwrap_or(&q_next);
+        footwork.fold(&sim, &perception, steered);
+        observe(&sim, &perception, steered);
         q_now = q_next;
         if fallen(&perception) {
             fall_time_s = Some(perception.time_s);
