@@ -508,6 +508,10 @@ pub struct SimBenchArgs {
     /// Simulated seconds per measurement.
     #[arg(long, default_value_t = 10.0)]
     pub seconds: f64,
+    /// Rounds of every measurement in turn; rows are the medians, shares
+    /// the medians of each round's ratio.
+    #[arg(long, default_value_t = 5)]
+    pub rounds: u32,
     /// Machine-readable output.
     #[arg(long)]
     pub json: bool,

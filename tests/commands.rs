@@ -755,3 +755,44 @@ fn deploy_recipes_run_over_tls() {
         String::from_utf8_lossy(&syntax.stderr)
     );
 }
+
+/// `bench sim` measures every row in rounds, each measurement in turn, and
+/// reports each share of the open loop's speed as the median of the
+/// rounds' ratios with their spread; the rounds are bounded.
+#[test]
+fn bench_sim_reports_its_shares_over_rounds() {
+    let out =
+        succeed(naofarm().args(["bench", "sim", "--json", "--seconds", "1", "--rounds", "3"]));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["rounds"], 3, "{v}");
+    for key in ["closed_loop", "arms_5ms", "arms", "firm"] {
+        let (share, spread) = if key == "closed_loop" {
+            (
+                &v["closed_loop_share_of_open_loop"],
+                &v["closed_loop_share_spread"],
+            )
+        } else {
+            (
+                &v[format!("{key}_share_of_open_loop")],
+                &v[format!("{key}_share_spread")],
+            )
+        };
+        let share = share.as_f64().unwrap();
+        let (lo, hi) = (spread[0].as_f64().unwrap(), spread[1].as_f64().unwrap());
+        assert!(share > 0.0 && share.is_finite(), "{key}: {v}");
+        assert!(lo <= share && share <= hi, "{key}: {lo} {share} {hi}");
+    }
+    let rows = v["rows"].as_array().unwrap();
+    assert!(
+        rows.iter()
+            .all(|r| r["realtime_factor"].as_f64().unwrap() > 0.0),
+        "{v}"
+    );
+    for bad in ["0", "101", "x"] {
+        let out = naofarm()
+            .args(["bench", "sim", "--seconds", "1", "--rounds", bad])
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(2), "--rounds {bad}");
+    }
+}

@@ -465,10 +465,20 @@ fn measure_file_walk(f: &FileWalk, seconds: f64) -> Result<Row, Failure> {
     Ok(r)
 }
 
+/// One measurement of `bench sim`: a variant's motion, or a file's walk.
+enum Spec {
+    /// Label, settings and motion (`stand`, `walk`, `walk-cl`).
+    Variant(&'static str, SimSettings, &'static str),
+    File(&'static FileWalk),
+}
+
 /// `naofarm bench sim`: real-time factor and physics steps per second on one core.
 pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
     if !(a.seconds.is_finite() && a.seconds >= 1.0 && a.seconds <= 600.0) {
         return Err(Failure::Usage(anyhow!("--seconds must be in [1, 600]")));
+    }
+    if !(1..=100).contains(&a.rounds) {
+        return Err(Failure::Usage(anyhow!("--rounds must be in [1, 100]")));
     }
     let d = SimSettings::default();
     let variants = [
@@ -537,48 +547,86 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
         ),
     ];
     let expert = ParamValues::default();
-    let mut rows = Vec::new();
+    // Every measurement, in the order of the table: the variants' three
+    // motions, then the files' walks.
+    let mut specs: Vec<Spec> = Vec::new();
     for (label, s) in variants {
         for motion in ["stand", "walk", "walk-cl"] {
-            let mut r = match motion {
-                "stand" => measure_stand(s, a.seconds)?,
-                "walk" => measure_walk(s, a.seconds, protocol::WalkEngine::OpenLoop, &expert)?,
-                _ => measure_walk(s, a.seconds, protocol::WalkEngine::ClosedLoop, &expert)?,
-            };
-            r.label = label.to_string();
-            rows.push(r);
+            specs.push(Spec::Variant(label, s, motion));
         }
     }
-    let first_file = rows.len();
-    for f in &FILES {
-        rows.push(measure_file_walk(f, a.seconds)?);
+    let first_file = specs.len();
+    specs.extend(FILES.iter().map(Spec::File));
+    // Rounds of every measurement in turn: a slow spell of a shared
+    // machine then slows each row alike, and the ratios are per round.
+    let mut runs: Vec<Vec<Row>> = specs.iter().map(|_| Vec::new()).collect();
+    for _ in 0..a.rounds {
+        for (spec, run) in specs.iter().zip(&mut runs) {
+            let mut r = match *spec {
+                Spec::Variant(_, s, "stand") => measure_stand(s, a.seconds)?,
+                Spec::Variant(_, s, "walk") => {
+                    measure_walk(s, a.seconds, protocol::WalkEngine::OpenLoop, &expert)?
+                }
+                Spec::Variant(_, s, _) => {
+                    measure_walk(s, a.seconds, protocol::WalkEngine::ClosedLoop, &expert)?
+                }
+                Spec::File(f) => measure_file_walk(f, a.seconds)?,
+            };
+            if let Spec::Variant(label, ..) = spec {
+                r.label = (*label).to_string();
+            }
+            run.push(r);
+        }
     }
     let rtf = |r: &Row| r.sim_s / r.wall_s;
     let sps = |r: &Row| r.sim_s / CYCLE_S * f64::from(r.settings.substeps) / r.wall_s;
-    let headline = rows
+    // Each measurement's row of median real-time factor.
+    let rows: Vec<&Row> = runs
         .iter()
-        .find(|r| r.motion == "walk" && r.settings == d)
-        .ok_or_else(|| Failure::Job(anyhow!("no default walk row")))?;
-    let closed = rows
-        .iter()
-        .find(|r| r.motion == "walk-cl" && r.settings == d)
-        .ok_or_else(|| Failure::Job(anyhow!("no default closed-loop walk row")))?;
+        .map(|run| {
+            let mut by_speed: Vec<&Row> = run.iter().collect();
+            by_speed.sort_by(|a, b| rtf(a).total_cmp(&rtf(b)));
+            by_speed[by_speed.len() / 2]
+        })
+        .collect();
+    let find = |motion: &str| {
+        rows.iter()
+            .position(|r| r.motion == motion && r.settings == d)
+            .ok_or_else(|| Failure::Job(anyhow!("no default {motion} row")))
+    };
+    let (headline, closed) = (find("walk")?, find("walk-cl")?);
+    let first_open = headline;
+    // A measurement's speed against another's: the median over the rounds
+    // of the ratio within each round.
+    let share = |of: usize, to: usize, per: &dyn Fn(&Row) -> f64| {
+        let mut ratios: Vec<f64> = runs[of]
+            .iter()
+            .zip(&runs[to])
+            .map(|(a, b)| per(a) / per(b))
+            .collect();
+        ratios.sort_by(f64::total_cmp);
+        let spread = (ratios[0], ratios[ratios.len() - 1]);
+        (ratios[ratios.len() / 2], spread)
+    };
     // The closed-loop walk's speed as a share of the open loop's, measured in
-    // the same run at the default settings.
-    let closed_share = rtf(closed) / rtf(headline);
-    let files: Vec<(&FileWalk, &Row)> = FILES.iter().zip(&rows[first_file..]).collect();
+    // the same rounds at the default settings.
+    let (closed_share, closed_spread) = share(closed, headline, &rtf);
+    let files: Vec<(&FileWalk, usize)> = FILES.iter().zip(first_file..).collect();
     let converged = files[0].1;
     // What a physics step costs there against the default's: about the same,
     // so the converged walk's share follows its steps per cycle (docs/walk.md,
     // "Why no code speed-up meets the 80 % on converged physics").
-    let converged_step_share = sps(converged) / sps(closed);
+    let (converged_step_share, _) = share(converged, closed, &sps);
+    let (headline, closed, converged) = (rows[headline], rows[closed], rows[converged]);
     if a.json {
         let mut v = serde_json::json!({
+            "rounds": a.rounds,
             "realtime_factor": rtf(headline),
             "steps_per_second": sps(headline),
             "motion": "expert walk, type 0, default settings, one core",
             "closed_loop_realtime_factor": rtf(closed),
             "closed_loop_share_of_open_loop": closed_share,
+            "closed_loop_share_spread": [closed_spread.0, closed_spread.1],
             "converged_steps_per_second_share": converged_step_share,
             "rows": rows.iter().map(|r| serde_json::json!({
                 "settings": r.label,
@@ -592,12 +640,18 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
                 "fell": r.fell,
             })).collect::<Vec<_>>(),
         });
-        for (f, r) in &files {
-            v[format!("{}_realtime_factor", f.key)] = rtf(r).into();
-            v[format!("{}_share_of_open_loop", f.key)] = (rtf(r) / rtf(headline)).into();
+        for (f, i) in &files {
+            let (of_open, spread) = share(*i, first_open, &rtf);
+            v[format!("{}_realtime_factor", f.key)] = rtf(rows[*i]).into();
+            v[format!("{}_share_of_open_loop", f.key)] = of_open.into();
+            v[format!("{}_share_spread", f.key)] = serde_json::json!([spread.0, spread.1]);
         }
         outln!("{v}");
     } else {
+        outln!(
+            "medians of {} rounds, each measurement in turn in every round",
+            a.rounds
+        );
         outln!(
             "{:<44} {:>7} {:>10} {:>12} {:>6}",
             "settings",
@@ -606,7 +660,7 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             "steps/s",
             "fell"
         );
-        for r in &rows {
+        for r in rows.iter().copied() {
             outln!(
                 "{:<44} {:>7} {:>10.1} {:>12.0} {:>6}",
                 r.label,
@@ -617,16 +671,21 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             );
         }
         outln!(
-            "closed-loop walk at the default settings: {:.1}x real time, {:.0} % of the open loop's",
+            "closed-loop walk at the default settings: {:.1}x real time, {:.0} % of the open loop's ({:.0}–{:.0} % over the rounds)",
             rtf(closed),
-            100.0 * closed_share
+            100.0 * closed_share,
+            100.0 * closed_spread.0,
+            100.0 * closed_spread.1
         );
-        for (f, r) in &files {
+        for (f, i) in &files {
+            let (of_open, spread) = share(*i, first_open, &rtf);
             outln!(
-                "closed-loop walk of the {} experiment: {:.1}x real time, {:.0} % of the open loop's at the default",
+                "closed-loop walk of the {} experiment: {:.1}x real time, {:.0} % of the open loop's at the default ({:.0}–{:.0} %)",
                 f.name(),
-                rtf(r),
-                100.0 * rtf(r) / rtf(headline)
+                rtf(rows[*i]),
+                100.0 * of_open,
+                100.0 * spread.0,
+                100.0 * spread.1
             );
             if f.key == "converged" {
                 outln!(
