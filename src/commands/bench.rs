@@ -595,7 +595,7 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             .ok_or_else(|| Failure::Job(anyhow!("no default {motion} row")))
     };
     let (headline, closed) = (find("walk")?, find("walk-cl")?);
-    let first_open = headline;
+    let open_loop = headline;
     // A measurement's speed against another's: the median over the rounds
     // of the ratio within each round.
     let share = |of: usize, to: usize, per: &dyn Fn(&Row) -> f64| {
@@ -641,7 +641,7 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             })).collect::<Vec<_>>(),
         });
         for (f, i) in &files {
-            let (of_open, spread) = share(*i, first_open, &rtf);
+            let (of_open, spread) = share(*i, open_loop, &rtf);
             v[format!("{}_realtime_factor", f.key)] = rtf(rows[*i]).into();
             v[format!("{}_share_of_open_loop", f.key)] = of_open.into();
             v[format!("{}_share_spread", f.key)] = serde_json::json!([spread.0, spread.1]);
@@ -678,7 +678,7 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             100.0 * closed_spread.1
         );
         for (f, i) in &files {
-            let (of_open, spread) = share(*i, first_open, &rtf);
+            let (of_open, spread) = share(*i, open_loop, &rtf);
             outln!(
                 "closed-loop walk of the {} experiment: {:.1}x real time, {:.0} % of the open loop's at the default ({:.0}–{:.0} %)",
                 f.name(),

@@ -460,6 +460,13 @@ fn table_request(exp: &Experiment, params: &[f64], k: u32) -> TrialRequest {
     }
 }
 
+/// How far a set's feet land beyond the legs' aim per step, mm, as a cell.
+fn landed_beyond_aim(r: &Row) -> String {
+    r.footwork
+        .filter(|w| w.touchdowns > 0)
+        .map_or("–".into(), |w| format!("{:+.1}", w.overreach_m * 1000.0))
+}
+
 /// mx over the plan's travel: near 1 for a set that walks as planned, well
 /// above it for one that slides or lunges.
 fn over_plan(r: &Row) -> Option<f64> {
@@ -562,11 +569,7 @@ fn table_text(exp: &Experiment, rows: &[Row], trials: u32) -> (String, String) {
             cell(r.footwork.map(|w| w.sliding_m))
         });
         line("mx by lean (m)", &|r| cell(r.footwork.map(|w| w.lean_m)));
-        line("landed beyond aim per step (mm)", &|r| {
-            r.footwork
-                .filter(|w| w.touchdowns > 0)
-                .map_or("–".into(), |w| format!("{:+.1}", w.overreach_m * 1000.0))
-        });
+        line("landed beyond aim per step (mm)", &landed_beyond_aim);
     }
     let json: Vec<serde_json::Value> = rows
         .iter()
@@ -767,11 +770,7 @@ fn index_html(
                 format!("{:.3} / {:.3} / {:.3}", w.stepping_m, w.sliding_m, w.lean_m)
             })
         });
-        line("landed beyond aim per step (mm)", &|r| {
-            r.footwork
-                .filter(|w| w.touchdowns > 0)
-                .map_or("–".into(), |w| format!("{:+.1}", w.overreach_m * 1000.0))
-        });
+        line("landed beyond aim per step (mm)", &landed_beyond_aim);
     }
     h += "</table>\n";
     if !replays.is_empty() {

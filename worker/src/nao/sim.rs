@@ -427,12 +427,12 @@ impl Sim {
             }
             hosts
         };
-        if hosts[0] != 0 {
-            return Err(SimError::Settings("the torso cannot be welded".into()));
-        }
         // Bodies, each host's mass gathered in body order (the torso's own
         // first, as before arms could be welded in part).
         let mut masses = vec![MassProperties::default(); model.bodies.len()];
+        // Whether a body hosts others (the torso's mass is always set).
+        let mut hosting = vec![false; model.bodies.len()];
+        hosting[0] = true;
         let mut places = Vec::with_capacity(model.bodies.len());
         let mut own_bodies = Vec::new();
         for (i, b) in model.bodies.iter().enumerate() {
@@ -442,6 +442,7 @@ impl Sim {
                 let rel = motions[host].inverse() * motions[i];
                 let offset = welded_offset(&rel, b.centre, model.bodies[host].centre);
                 masses[host] += local.transform_by(&to_pose(&offset));
+                hosting[host] = true;
                 places.push(Place::Welded { host, rel });
                 continue;
             }
@@ -463,11 +464,10 @@ impl Sim {
         let Place::Own(torso) = places[0] else {
             return Err(SimError::Settings("the torso cannot be welded".into()));
         };
-        for (i, place) in places.iter().enumerate() {
-            // A body that hosts none keeps the mass it was built with.
-            let hosts_some = i == 0 || hosts.iter().enumerate().any(|(k, &h)| h == i && k != i);
+        // A body that hosts none keeps the mass it was built with.
+        for ((place, mass), hosts_some) in places.iter().zip(&masses).zip(&hosting) {
             if let (Place::Own(h), true) = (place, hosts_some) {
-                world.bodies[*h].set_additional_mass_properties(masses[i], false);
+                world.bodies[*h].set_additional_mass_properties(*mass, false);
             }
         }
         // Colliders.
@@ -480,7 +480,10 @@ impl Sim {
                 Place::Own(h) => (*h, Pose::IDENTITY),
                 Place::Welded { host, rel } => {
                     let Place::Own(h) = places[*host] else {
-                        return Err(SimError::Settings("a welded host".into()));
+                        return Err(SimError::Settings(format!(
+                            "{} is welded to a body welded itself",
+                            b.name
+                        )));
                     };
                     (
                         h,
