@@ -326,10 +326,13 @@ pub fn is_upper_body_joint(name: &str) -> bool {
     name.starts_with("he") || is_arm_joint(name)
 }
 
-/// Whether a joint is a shoulder's pitch (the one a swinging arm swings).
+/// The left and right shoulder pitches: the joints a swinging arm swings.
+pub const SHOULDER_PITCHES: [&str; 2] = ["lae1", "rae1"];
+
+/// Whether a joint is a shoulder's pitch ([`SHOULDER_PITCHES`]).
 #[must_use]
 pub fn is_shoulder_pitch(name: &str) -> bool {
-    name == "lae1" || name == "rae1"
+    SHOULDER_PITCHES.contains(&name)
 }
 
 /// Whether a joint is one of the arms' (shoulders, elbows).

@@ -371,7 +371,7 @@ impl Gait {
             com: Vec::new(),
             leg_slots: leg_slots(model),
             limits: model.joints.iter().map(|j| j.limits_rad).collect(),
-            shoulders: [model.joint_index("lae1"), model.joint_index("rae1")],
+            shoulders: super::sim::SHOULDER_PITCHES.map(|name| model.joint_index(name)),
         };
         g.plan_com(duration_s, tc);
         g
