@@ -512,6 +512,7 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
         "speed_cap_joints=xyz",
         "friction_scale=0",
         "weld_arm_rest=2",
+        "friction_in_bias_pass=0.5",
     ] {
         let out = naofarm()
             .args(["trial", "--trials", "1", "--limit", bad])

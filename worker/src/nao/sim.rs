@@ -105,6 +105,11 @@ pub struct SimSettings {
     /// measure a walk on a slippery floor (`naofarm trial --limit`), not
     /// for trials.
     pub friction_scale: f64,
+    /// Friction solved in the biased pass of each step as well as in the
+    /// unbiased one (rapier3d's `friction_in_bias_pass`; off as in rapier):
+    /// kept to measure where the feet's creep at 10 ms comes from
+    /// (`naofarm trial --limit`, docs/walk.md), not for trials.
+    pub friction_in_bias_pass: bool,
 }
 
 impl Default for SimSettings {
@@ -133,6 +138,7 @@ impl Default for SimSettings {
             speed_cap_joints: 0,
             max_torque_nm: MAX_TORQUE_NM,
             friction_scale: 1.0,
+            friction_in_bias_pass: false,
         }
     }
 }
@@ -394,6 +400,7 @@ impl Sim {
             settings.contact_prediction_m as f32;
         world.integration_parameters.static_contact_softness = contact;
         world.integration_parameters.speculative_joint_limits = settings.firm_stops;
+        world.integration_parameters.friction_in_bias_pass = settings.friction_in_bias_pass;
         world.integration_parameters.joint_limits_after_contacts = if settings.firm_stops {
             FIRM_STOP_RESOLVE_PAST_DEG.to_radians() as f32
         } else {
