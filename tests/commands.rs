@@ -789,6 +789,20 @@ fn bench_sim_reports_its_shares_over_rounds() {
             .all(|r| r["realtime_factor"].as_f64().unwrap() > 0.0),
         "{v}"
     );
+    // One thread's CPU clock never runs ahead of the wall clock, so its
+    // real-time factor is never the smaller (up to the clocks' reads).
+    for r in rows {
+        let (wall, cpu) = (
+            r["realtime_factor"].as_f64().unwrap(),
+            r["cpu_realtime_factor"].as_f64().unwrap(),
+        );
+        assert!(cpu.is_finite() && cpu >= 0.99 * wall, "{r}");
+    }
+    assert!(
+        v["arms_5ms_cpu_realtime_factor"].as_f64().unwrap() > 0.0,
+        "{v}"
+    );
+    assert_eq!(v["shares_by"], "the measuring thread's CPU clock", "{v}");
     for bad in ["0", "101", "x"] {
         let out = naofarm()
             .args(["bench", "sim", "--seconds", "1", "--rounds", bad])

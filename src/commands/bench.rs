@@ -338,14 +338,23 @@ struct Row {
     settings: SimSettings,
     sim_s: f64,
     wall_s: f64,
+    /// CPU time of the measuring thread: unlike the wall time, it leaves
+    /// out the time other processes of a shared machine had the core.
+    cpu_s: f64,
     fell: bool,
+}
+
+/// The CPU time this thread has used, s (a measurement runs on its thread).
+fn thread_cpu_s() -> f64 {
+    let t = rustix::time::clock_gettime(rustix::time::ClockId::ThreadCPUTime);
+    t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
 }
 
 fn measure_stand(settings: SimSettings, seconds: f64) -> Result<Row, Failure> {
     let model =
         NaoModel::with_params(0, &ParamValues::default()).map_err(|e| Failure::Job(e.into()))?;
     let q = standing_angles(&model);
-    let t0 = Instant::now();
+    let (t0, cpu0) = (Instant::now(), thread_cpu_s());
     let mut sim = Sim::new(&model, settings, &Start::upright(q.clone()))
         .map_err(|e| Failure::Job(e.into()))?;
     let mut p = sim.perceive();
@@ -360,6 +369,7 @@ fn measure_stand(settings: SimSettings, seconds: f64) -> Result<Row, Failure> {
         settings,
         sim_s: p.time_s,
         wall_s: t0.elapsed().as_secs_f64(),
+        cpu_s: thread_cpu_s() - cpu0,
         fell,
     })
 }
@@ -370,7 +380,7 @@ fn measure_walk(
     walk: protocol::WalkEngine,
     params: &ParamValues,
 ) -> Result<Row, Failure> {
-    let t0 = Instant::now();
+    let (t0, cpu0) = (Instant::now(), thread_cpu_s());
     let t = trial::run_observed(
         0,
         params,
@@ -390,6 +400,7 @@ fn measure_walk(
         settings,
         sim_s: t.measurement.sim_time_s,
         wall_s: t0.elapsed().as_secs_f64(),
+        cpu_s: thread_cpu_s() - cpu0,
         fell: t.measurement.fell,
     })
 }
@@ -579,6 +590,7 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
         }
     }
     let rtf = |r: &Row| r.sim_s / r.wall_s;
+    let cpu_rtf = |r: &Row| r.sim_s / r.cpu_s;
     let sps = |r: &Row| r.sim_s / CYCLE_S * f64::from(r.settings.substeps) / r.wall_s;
     // Each measurement's row of median real-time factor.
     let rows: Vec<&Row> = runs
@@ -587,6 +599,15 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             let mut by_speed: Vec<&Row> = run.iter().collect();
             by_speed.sort_by(|a, b| rtf(a).total_cmp(&rtf(b)));
             by_speed[by_speed.len() / 2]
+        })
+        .collect();
+    // Each measurement's median real-time factor by its thread's CPU clock.
+    let cpu: Vec<f64> = runs
+        .iter()
+        .map(|run| {
+            let mut f: Vec<f64> = run.iter().map(cpu_rtf).collect();
+            f.sort_by(f64::total_cmp);
+            f[f.len() / 2]
         })
         .collect();
     let find = |motion: &str| {
@@ -610,25 +631,29 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
     };
     // The closed-loop walk's speed as a share of the open loop's, measured in
     // the same rounds at the default settings.
-    let (closed_share, closed_spread) = share(closed, headline, &rtf);
+    let (closed_share, closed_spread) = share(closed, headline, &cpu_rtf);
     let files: Vec<(&FileWalk, usize)> = FILES.iter().zip(first_file..).collect();
     let converged = files[0].1;
     // What a physics step costs there against the default's: about the same,
     // so the converged walk's share follows its steps per cycle (docs/walk.md,
     // "Why no code speed-up meets the 80 % on converged physics").
     let (converged_step_share, _) = share(converged, closed, &sps);
+    let (hi, ci) = (headline, closed);
     let (headline, closed, converged) = (rows[headline], rows[closed], rows[converged]);
     if a.json {
         let mut v = serde_json::json!({
             "rounds": a.rounds,
             "realtime_factor": rtf(headline),
+            "cpu_realtime_factor": cpu[hi],
             "steps_per_second": sps(headline),
             "motion": "expert walk, type 0, default settings, one core",
+            "shares_by": "the measuring thread's CPU clock",
             "closed_loop_realtime_factor": rtf(closed),
+            "closed_loop_cpu_realtime_factor": cpu[ci],
             "closed_loop_share_of_open_loop": closed_share,
             "closed_loop_share_spread": [closed_spread.0, closed_spread.1],
             "converged_steps_per_second_share": converged_step_share,
-            "rows": rows.iter().map(|r| serde_json::json!({
+            "rows": rows.iter().zip(&cpu).map(|(r, c)| serde_json::json!({
                 "settings": r.label,
                 "motion": r.motion,
                 "substeps": r.settings.substeps,
@@ -636,53 +661,60 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
                 "pgs_iterations": r.settings.pgs_iterations,
                 "weld_upper_body": r.settings.weld_upper_body,
                 "realtime_factor": rtf(r),
+                "cpu_realtime_factor": c,
                 "steps_per_second": sps(r),
                 "fell": r.fell,
             })).collect::<Vec<_>>(),
         });
         for (f, i) in &files {
-            let (of_open, spread) = share(*i, open_loop, &rtf);
+            let (of_open, spread) = share(*i, open_loop, &cpu_rtf);
             v[format!("{}_realtime_factor", f.key)] = rtf(rows[*i]).into();
+            v[format!("{}_cpu_realtime_factor", f.key)] = cpu[*i].into();
             v[format!("{}_share_of_open_loop", f.key)] = of_open.into();
             v[format!("{}_share_spread", f.key)] = serde_json::json!([spread.0, spread.1]);
         }
         outln!("{v}");
     } else {
         outln!(
-            "medians of {} rounds, each measurement in turn in every round",
+            "medians of {} rounds, each measurement in turn in every round; \
+             realtime× by the wall clock and by the thread's CPU clock, shares by CPU",
             a.rounds
         );
         outln!(
-            "{:<44} {:>7} {:>10} {:>12} {:>6}",
+            "{:<44} {:>7} {:>10} {:>10} {:>12} {:>6}",
             "settings",
             "motion",
             "realtime×",
+            "CPU rt×",
             "steps/s",
             "fell"
         );
-        for r in rows.iter().copied() {
+        for (r, c) in rows.iter().copied().zip(&cpu) {
             outln!(
-                "{:<44} {:>7} {:>10.1} {:>12.0} {:>6}",
+                "{:<44} {:>7} {:>10.1} {:>10.1} {:>12.0} {:>6}",
                 r.label,
                 r.motion,
                 rtf(r),
+                c,
                 sps(r),
                 r.fell
             );
         }
         outln!(
-            "closed-loop walk at the default settings: {:.1}x real time, {:.0} % of the open loop's ({:.0}–{:.0} % over the rounds)",
+            "closed-loop walk at the default settings: {:.1}x real time ({:.1}x by CPU), {:.0} % of the open loop's ({:.0}–{:.0} % over the rounds)",
             rtf(closed),
+            cpu[ci],
             100.0 * closed_share,
             100.0 * closed_spread.0,
             100.0 * closed_spread.1
         );
         for (f, i) in &files {
-            let (of_open, spread) = share(*i, open_loop, &rtf);
+            let (of_open, spread) = share(*i, open_loop, &cpu_rtf);
             outln!(
-                "closed-loop walk of the {} experiment: {:.1}x real time, {:.0} % of the open loop's at the default ({:.0}–{:.0} %)",
+                "closed-loop walk of the {} experiment: {:.1}x real time ({:.1}x by CPU), {:.0} % of the open loop's at the default ({:.0}–{:.0} %)",
                 f.name(),
                 rtf(rows[*i]),
+                cpu[*i],
                 100.0 * of_open,
                 100.0 * spread.0,
                 100.0 * spread.1
