@@ -101,8 +101,6 @@ pub struct Tracker {
     offset: f64,
     /// Cycles each foot has been in the air.
     air: [u32; 2],
-    /// The feet's bodies in the model, if it has both.
-    foot_bodies: Option<[usize; 2]>,
     reach_sum: f64,
 }
 
@@ -112,8 +110,6 @@ impl Tracker {
     pub fn new(sim: &Sim, p: &Perception) -> Self {
         let feet = sim.feet_centres();
         let offset = p.torso_position_m[0] - (feet[0][0] + feet[1][0]) / 2.0;
-        let model = sim.model();
-        let body = |name: &str| model.bodies.iter().position(|b| b.name == name);
         Self {
             work: Footwork::default(),
             feet,
@@ -121,7 +117,6 @@ impl Tracker {
             offset0: offset,
             offset,
             air: [0, 0],
-            foot_bodies: body("lfoot").zip(body("rfoot")).map(|(l, r)| [l, r]),
             reach_sum: 0.0,
         }
     }
@@ -141,14 +136,12 @@ impl Tracker {
             if now && !was {
                 self.work.plants += 1;
                 if self.air[side] >= AIR_CYCLES {
-                    if let Some(feet) = self.foot_bodies {
-                        let model = sim.model();
-                        let landed = ahead(model, feet, side, &p.joint_angles_rad);
-                        let aimed = ahead(model, feet, side, targets);
-                        if (landed - aimed).is_finite() {
-                            self.reach_sum += landed - aimed;
-                            self.work.touchdowns += 1;
-                        }
+                    let (model, feet) = (sim.model(), sim.foot_bodies());
+                    let landed = ahead(model, feet, side, &p.joint_angles_rad);
+                    let aimed = ahead(model, feet, side, targets);
+                    if (landed - aimed).is_finite() {
+                        self.reach_sum += landed - aimed;
+                        self.work.touchdowns += 1;
                     }
                 }
             }

@@ -272,6 +272,8 @@ pub struct Sim {
     torso: RigidBodyHandle,
     root_joint: MultibodyJointHandle,
     feet: [Vec<ColliderHandle>; 2],
+    /// The feet's bodies in the model (left, right).
+    foot_bodies: [usize; 2],
     ground: ColliderHandle,
     own_bodies: Vec<RigidBodyHandle>,
     cycle: u64,
@@ -482,6 +484,7 @@ impl Sim {
         }
         // Colliders.
         let mut feet = [Vec::new(), Vec::new()];
+        let mut foot_bodies = [None, None];
         for (i, b) in model.bodies.iter().enumerate() {
             if !b.collider {
                 continue;
@@ -513,10 +516,18 @@ impl Sim {
             if b.name.ends_with("foot") || b.name.ends_with("toe") {
                 feet[side].push(h);
             }
+            if b.name.ends_with("foot") {
+                foot_bodies[side] = Some(i);
+            }
         }
-        if feet.iter().any(Vec::is_empty) {
+        let (Some(left), Some(right), false) = (
+            foot_bodies[0],
+            foot_bodies[1],
+            feet.iter().any(Vec::is_empty),
+        ) else {
             return Err(SimError::Settings("a robot without both feet".into()));
-        }
+        };
+        let foot_bodies = [left, right];
         // Joints (bodies inserted at their posed places: anchors are given in each
         // body's own frame, which is the zero-pose frame carried along).
         let mut hinges = vec![None; n];
@@ -580,6 +591,7 @@ impl Sim {
             welded_angles,
             torso,
             feet,
+            foot_bodies,
             ground,
             own_bodies,
             cycle: 0,
@@ -846,6 +858,12 @@ impl Sim {
             torso_rotation: [q.i, q.j, q.k, q.w],
             torso_tilt_rad: libm::acos(up.z.clamp(-1.0, 1.0)),
         }
+    }
+
+    /// The feet's bodies in the model (left, right).
+    #[must_use]
+    pub fn foot_bodies(&self) -> [usize; 2] {
+        self.foot_bodies
     }
 
     /// Ground truth, for measurements: each foot's (left, right) centre in
