@@ -444,6 +444,17 @@ fn a_nao_report_has_an_animated_replay_of_expert_optim1_and_optim2() {
             assert!(md.contains("| mx by sliding (m) |"), "{md}");
             // Where its feet land against the legs' aim, over its touchdowns.
             assert!(md.contains("| landed beyond aim per step (mm) |"), "{md}");
+            // How it carries its torso: the cell is the column's mean pitch.
+            let pitch = w["torso_pitch_deg"].as_f64().unwrap();
+            assert!(pitch.abs() < 45.0, "{w}");
+            let row = md
+                .lines()
+                .find(|l| l.starts_with("| torso pitch (°, − leans back) |"))
+                .unwrap_or_else(|| panic!("{md}"));
+            assert!(
+                row.contains(&format!("| {pitch:+.1} |")),
+                "{row} against {pitch}"
+            );
             assert!(w["touchdowns"].as_u64().unwrap() > 0, "{w}");
             assert!(w["overreach_m"].as_f64().unwrap().is_finite(), "{w}");
             // The expert's distance is steps: it neither slides nor lunges.

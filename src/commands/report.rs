@@ -460,6 +460,14 @@ fn table_request(exp: &Experiment, params: &[f64], k: u32) -> TrialRequest {
     }
 }
 
+/// The torso's mean pitch over the cycles, degrees (negative: leaning
+/// back): a fast walk that leans far back stands on its heels, and its
+/// distance swings with the physics step (docs/walk.md).
+fn torso_pitch(r: &Row) -> String {
+    r.footwork
+        .map_or("–".into(), |w| format!("{:+.1}", w.torso_pitch_deg))
+}
+
 /// How far a set's feet land beyond the legs' aim per step, mm, as a cell.
 fn landed_beyond_aim(r: &Row) -> String {
     r.footwork
@@ -570,6 +578,7 @@ fn table_text(exp: &Experiment, rows: &[Row], trials: u32) -> (String, String) {
         });
         line("mx by lean (m)", &|r| cell(r.footwork.map(|w| w.lean_m)));
         line("landed beyond aim per step (mm)", &landed_beyond_aim);
+        line("torso pitch (°, − leans back)", &torso_pitch);
     }
     let json: Vec<serde_json::Value> = rows
         .iter()
@@ -771,6 +780,7 @@ fn index_html(
             })
         });
         line("landed beyond aim per step (mm)", &landed_beyond_aim);
+        line("torso pitch (°, − leans back)", &torso_pitch);
     }
     h += "</table>\n";
     if !replays.is_empty() {

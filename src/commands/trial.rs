@@ -214,6 +214,10 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
                     w.touchdowns
                 );
             }
+            outln!(
+                "the torso's mean pitch: {:+.1}° (negative: leaning back)",
+                w.torso_pitch_deg
+            );
         }
         if diverged > 0 {
             outln!("{diverged} of the falls were the physics diverging (counted as falls, no distance)");

@@ -1024,6 +1024,79 @@ mod tests {
         assert!(caught > 1.15 * plants, "{caught} against {plants}");
     }
 
+    /// Seed 2's Optim.1 of the 4 × 5 ms arms file (experiment 2 on the farm,
+    /// `docs/results.md`, to 4 digits).
+    const ARMS_5MS_OPTIM1: [(&str, f64); 5] = [
+        ("ThighRelHip2_Z", -0.0795),
+        ("ratio_flexion", 0.7530),
+        ("long_offset_MidAnkles_2_Torso_Init", 0.0069),
+        ("height_lift", 0.0271),
+        ("xlength_step_max", 0.1041),
+    ];
+
+    /// Where the walks part with the time step (docs/walk.md): seed 2's
+    /// Optim.1 of the 4 × 5 ms arms file, the file as shipped with only the
+    /// physics steps per cycle changed, carries its torso nearly upright at
+    /// 5 ms and 1 ms but leans far back at 2 ms, stands on its heels, and
+    /// walks clearly shorter. The footwork's `torso_pitch_deg` is the mean
+    /// over the cycles of the torso's pitch, checked here against the
+    /// torso's x axis computed apart. Measured (seeds 777–780): −3.2°,
+    /// −15.6° and +0.2°; 5.52, 4.88 and 5.38 m.
+    #[test]
+    fn the_fast_walk_leans_back_at_2ms_and_walks_shorter() {
+        let (_, physics, expert) = shipped(include_str!(
+            "../../../experiments/physical-technical-arms-5ms.toml"
+        ));
+        let optim = with_values(expert, &ARMS_5MS_OPTIM1);
+        let at = |substeps: u32| {
+            let physics = SimSettings {
+                substeps,
+                ..physics
+            };
+            let (mut pitch, mut mx) = (0.0, 0.0);
+            for seed in 777..781 {
+                let mut sum = 0.0;
+                let mut cycles = 0.0;
+                let t = trial::run_observed(
+                    0,
+                    &optim,
+                    seed,
+                    10.0,
+                    physics,
+                    closed(),
+                    &mut |sim, _, _| {
+                        let pose = sim.body_poses()[0];
+                        let q = nalgebra::UnitQuaternion::from_quaternion(
+                            nalgebra::Quaternion::new(pose[6], pose[3], pose[4], pose[5]),
+                        );
+                        let x = q * nalgebra::Vector3::x();
+                        sum += (-x.z).asin().to_degrees();
+                        cycles += 1.0;
+                    },
+                )
+                .unwrap();
+                assert!(!t.measurement.fell, "seed {seed} at {substeps} steps");
+                let own = t.footwork.torso_pitch_deg;
+                assert!(
+                    (own - sum / cycles).abs() < 1e-6,
+                    "{own} against {}",
+                    sum / cycles
+                );
+                pitch += own / 4.0;
+                mx += t.measurement.x_m / 4.0;
+            }
+            (pitch, mx)
+        };
+        let (five, two, one) = (at(4), at(10), at(20));
+        println!("5 ms {five:.3?}, 2 ms {two:.3?}, 1 ms {one:.3?}");
+        assert!(five.0 > -6.0 && one.0 > -6.0, "{five:?} {one:?}");
+        assert!(two.0 < -10.0, "{two:?}");
+        assert!(
+            two.1 < five.1 - 0.5 && two.1 < one.1 - 0.3,
+            "{five:?} {two:?} {one:?}"
+        );
+    }
+
     /// The pace issue's 6.0 m, reached on converged physics with the step
     /// period co-optimised (`experiments/physical-technical-converged-period.toml`):
     /// the best set its 500 iterations found (Optim.1, iteration 369, as

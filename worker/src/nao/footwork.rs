@@ -18,6 +18,11 @@
 //! touchdown the tracker compares the feet's distance along the torso's x
 //! axis from the forward kinematics of the true joint angles with that of
 //! the angles the servos were steered to (`overreach_m`).
+//!
+//! How the torso is carried shows in `torso_pitch_deg`, its mean pitch over
+//! the cycles read: a fast walk that leans far back stands on its heels, and
+//! its distance swings with the physics step (docs/walk.md, "Where the walks
+//! part with the time step").
 
 use super::kinematics::{self, Iso};
 use super::model::NaoModel;
@@ -52,6 +57,9 @@ pub struct Footwork {
     /// Touchdowns `overreach_m` averages (a landing after at least
     /// [`AIR_CYCLES`] in the air).
     pub touchdowns: u32,
+    /// The torso's mean forward pitch over the cycles read (its x axis
+    /// below the horizon), degrees; negative: leaning back.
+    pub torso_pitch_deg: f64,
 }
 
 impl Footwork {
@@ -62,6 +70,7 @@ impl Footwork {
         let mut plants = 0u64;
         let mut touchdowns = 0u64;
         let mut reach = 0.0;
+        let mut pitch = 0.0;
         let mut n = 0u32;
         for w in trials {
             sum.stepping_m += w.stepping_m;
@@ -71,6 +80,7 @@ impl Footwork {
             // Weighted by touchdowns: the mean over every touchdown.
             reach += w.overreach_m * f64::from(w.touchdowns);
             touchdowns += u64::from(w.touchdowns);
+            pitch += w.torso_pitch_deg;
             n += 1;
         }
         (n > 0).then(|| {
@@ -86,6 +96,7 @@ impl Footwork {
                     0.0
                 },
                 touchdowns: u32::try_from(touchdowns / u64::from(n)).unwrap_or(u32::MAX),
+                torso_pitch_deg: pitch / k,
             }
         })
     }
@@ -102,6 +113,8 @@ pub struct Tracker {
     /// Cycles each foot has been in the air.
     air: [u32; 2],
     reach_sum: f64,
+    pitch_sum: f64,
+    cycles: u32,
 }
 
 impl Tracker {
@@ -118,6 +131,8 @@ impl Tracker {
             offset,
             air: [0, 0],
             reach_sum: 0.0,
+            pitch_sum: 0.0,
+            cycles: 0,
         }
     }
 
@@ -154,6 +169,8 @@ impl Tracker {
             self.feet[side] = *centre;
         }
         self.offset = p.torso_position_m[0] - (self.feet[0][0] + self.feet[1][0]) / 2.0;
+        self.pitch_sum += forward_pitch_deg(p.torso_rotation);
+        self.cycles += 1;
     }
 
     /// The split so far.
@@ -166,9 +183,22 @@ impl Tracker {
             } else {
                 0.0
             },
+            torso_pitch_deg: if self.cycles > 0 {
+                self.pitch_sum / f64::from(self.cycles)
+            } else {
+                0.0
+            },
             ..self.work
         }
     }
+}
+
+/// How far the x axis of a body turned by unit quaternion `[x, y, z, w]`
+/// points below the horizon, degrees (negative: above it, leaning back).
+#[must_use]
+pub fn forward_pitch_deg([x, y, z, w]: [f64; 4]) -> f64 {
+    // The x axis's z component in the world is 2(xz − wy).
+    libm::asin((2.0 * (w * y - x * z)).clamp(-1.0, 1.0)).to_degrees()
 }
 
 /// How far foot `side`'s centre is ahead of the other's along the torso's
