@@ -450,6 +450,11 @@ pub struct TrialArgs {
     /// experiment's; see `bench sim`).
     #[arg(long)]
     pub substeps: Option<u32>,
+    /// Draw each trial's physics steps per cycle from --substeps..=this by
+    /// its seed (`[physics] substeps_max`; 0: none). Default: the
+    /// experiment's band, unless --substeps is given (a fixed step).
+    #[arg(long)]
+    pub substeps_max: Option<u32>,
     /// Rapier solver iterations per sub-step, 1–16 (default 1).
     #[arg(long)]
     pub solver_iterations: Option<u32>,
@@ -489,7 +494,7 @@ pub struct TrialArgs {
         requires_all = ["iteration", "trial"],
         conflicts_with_all = ["params", "trials", "seed", "robot_type", "duration", "substeps",
             "solver_iterations", "pgs_iterations", "armature", "contact_hz", "firm_stops",
-            "firm_stop_window_deg"]
+            "firm_stop_window_deg", "substeps_max"]
     )]
     pub run_dir: Option<std::path::PathBuf>,
     /// With --run: the iteration.

@@ -504,6 +504,41 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--pgs-iterations"));
+    // A band of steps below its own bottom, or beyond 50.
+    for band in [["16", "12"], ["2", "51"]] {
+        let err = fails(
+            naofarm().args([
+                "trial",
+                "--trials",
+                "1",
+                "--substeps",
+                band[0],
+                "--substeps-max",
+                band[1],
+            ]),
+            2,
+        );
+        assert!(err.contains("--substeps-max"), "{err}");
+    }
+    // With a good band, each trial says the step it drew, within the band.
+    let out = succeed(naofarm().args([
+        "trial",
+        "--json",
+        "--trials",
+        "3",
+        "--duration",
+        "1",
+        "--substeps",
+        "2",
+        "--substeps-max",
+        "4",
+    ]));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["physics"]["substeps_max"], 4, "{v}");
+    for t in v["trials"].as_array().unwrap() {
+        let k = t["substeps"].as_u64().unwrap();
+        assert!((2..=4).contains(&k), "{t}");
+    }
     for bad in [
         "speed_cap_scale=-1",
         "torque=3",

@@ -270,6 +270,12 @@ pub struct Physics {
     /// than this per physics step passes it before its row is in place: the
     /// arms file's faster walk needs 8 (`docs/walk.md`, "The stop window").
     pub firm_stop_window_deg: f64,
+    /// With it (`substeps`..=50), each trial draws its physics steps per
+    /// cycle uniformly from `substeps..=substeps_max` by its seed, so that
+    /// CLOP maximises the mean over a band of steps and cannot fit an
+    /// optimum to one of them (`docs/walk.md`, "CLOP optimises into the
+    /// time step"). 0 (the default): every trial takes `substeps`.
+    pub substeps_max: u32,
 }
 
 impl std::fmt::Display for Physics {
@@ -287,6 +293,13 @@ impl std::fmt::Display for Physics {
         // The two later keys only when set, so a default run reads as before.
         if self.contact_hz != Self::default().contact_hz {
             write!(f, ", ground contact {} Hz", self.contact_hz)?;
+        }
+        if self.substeps_max != 0 {
+            write!(
+                f,
+                ", drawn per trial from {}-{} steps per cycle",
+                self.substeps, self.substeps_max
+            )?;
         }
         if self.firm_stops {
             write!(f, ", firm stops")?;
@@ -308,6 +321,7 @@ impl Default for Physics {
             contact_hz: 500.0,
             firm_stops: false,
             firm_stop_window_deg: 3.0,
+            substeps_max: 0,
         }
     }
 }
@@ -323,6 +337,13 @@ impl Physics {
             if v == 0 || v > hi {
                 return Err((field, format!("{v} is not in 1..={hi}")));
             }
+        }
+        let m = self.substeps_max;
+        if m != 0 && !(self.substeps..=50).contains(&m) {
+            return Err((
+                "substeps_max",
+                format!("{m} is not 0 or in {}..=50 (substeps..=50)", self.substeps),
+            ));
         }
         let a = self.armature_kg_m2;
         if !(a.is_finite() && (0.0..=0.1).contains(&a)) {
@@ -737,6 +758,16 @@ expert = -0.04
             ),
             (
                 "iterations = 5",
+                "iterations = 5\n[physics]\nsubsteps = 16\nsubsteps_max = 12",
+                "physics.substeps_max",
+            ),
+            (
+                "iterations = 5",
+                "iterations = 5\n[physics]\nsubsteps_max = 51",
+                "physics.substeps_max",
+            ),
+            (
+                "iterations = 5",
                 "iterations = 5\n[physics]\ncontact_hz = inf",
                 "physics.contact_hz",
             ),
@@ -768,6 +799,8 @@ expert = -0.04
             "physical-converged.toml",
             "physical-technical-converged.toml",
             "physical-technical-converged-period.toml",
+            "physical-technical-converged-period-1ms.toml",
+            "physical-technical-converged-period-band.toml",
             "physical-stiff.toml",
             "physical-firm.toml",
             "physical-technical-stiff.toml",
@@ -783,6 +816,20 @@ expert = -0.04
             if f.ends_with("converged.toml") {
                 assert_eq!(e.physics.substeps, 10, "{f}");
                 assert_eq!(e.fixed.get("double_support"), Some(&0.0), "{f}");
+            }
+            // The step-period file at 1 ms, and with each trial's step drawn
+            // from 1.25 to 0.67 ms; every other file at one step.
+            let band = match f {
+                "physical-technical-converged-period-1ms.toml" => (20, 0),
+                "physical-technical-converged-period-band.toml" => (16, 30),
+                _ => (e.physics.substeps, 0),
+            };
+            assert_eq!((e.physics.substeps, e.physics.substeps_max), band, "{f}");
+            if f.ends_with("band.toml") {
+                assert!(e
+                    .physics
+                    .to_string()
+                    .ends_with("drawn per trial from 16-30 steps per cycle"));
             }
             if f.ends_with("stiff.toml") {
                 assert_eq!(e.physics.substeps, Physics::default().substeps, "{f}");

@@ -86,6 +86,12 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         contact_hz: a.contact_hz.unwrap_or(d.contact_hz),
         firm_stops: a.firm_stops.unwrap_or(d.firm_stops),
         firm_stop_window_deg: a.firm_stop_window_deg.unwrap_or(d.firm_stop_window_deg),
+        // --substeps alone asks for that step, not the file's band.
+        substeps_max: a.substeps_max.unwrap_or(if a.substeps.is_some() {
+            0
+        } else {
+            d.substeps_max
+        }),
     };
     physics.validate().map_err(|(field, m)| {
         let flag = field.trim_end_matches("_kg_m2").replace('_', "-");
@@ -381,6 +387,7 @@ fn trial_json(t: &NaoTrial) -> serde_json::Value {
         "sim_time_s": m.sim_time_s,
         "stop_excess": t.stop_excess.iter().map(stop_excess_json).collect::<Vec<_>>(),
         "cycles": t.cycles,
+        "substeps": t.substeps,
         "footwork": t.footwork,
         "speed_capped": t
             .speed_capped

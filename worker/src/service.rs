@@ -75,10 +75,12 @@ impl WorkerConfig {
                 req.duration_s, self.max_duration_s
             ));
         }
-        if req.physics.substeps > self.max_substeps {
+        // A band's trials may draw up to its top.
+        let most = req.physics.substeps.max(req.physics.substeps_max);
+        if most > self.max_substeps {
             return Some(format!(
-                "{} physics substeps are beyond this worker's limit of {}",
-                req.physics.substeps, self.max_substeps
+                "{most} physics substeps are beyond this worker's limit of {}",
+                self.max_substeps
             ));
         }
         if !self.models.contains(&req.model) {
@@ -516,5 +518,28 @@ mod tests {
         let long_note = Some("n".repeat(5000));
         assert!(read_grant(&grant(vec![bad], long_note)).is_err());
         assert!(read_grant(b"not a grant").is_err());
+    }
+
+    /// A worker limited to 20 physics steps per cycle refuses a trial whose
+    /// band may draw more, naming the band's top, and takes one whose band
+    /// stays within it.
+    #[test]
+    fn a_step_band_beyond_the_workers_limit_is_refused() {
+        let cfg = WorkerConfig {
+            max_substeps: 20,
+            ..WorkerConfig::default()
+        };
+        let band = |lo, hi| TrialRequest {
+            physics: Physics {
+                substeps: lo,
+                substeps_max: hi,
+                ..Physics::default()
+            },
+            ..trial(0, vec![])
+        };
+        let why = cfg.beyond_limits(&band(16, 30)).unwrap();
+        assert!(why.starts_with("30 physics substeps"), "{why}");
+        assert_eq!(cfg.beyond_limits(&band(16, 20)), None);
+        assert_eq!(cfg.beyond_limits(&band(20, 0)), None);
     }
 }

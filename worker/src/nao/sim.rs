@@ -45,6 +45,10 @@ const FIRM_STOP_RESOLVE_PAST_DEG: f64 = -0.5;
 pub struct SimSettings {
     /// Physics steps per 20 ms cycle.
     pub substeps: u32,
+    /// With it (≥ `substeps`), a trial draws its physics steps per cycle
+    /// from `substeps..=substeps_max` by its seed (`protocol::Physics::substeps_max`;
+    /// [`crate::nao::trial::drawn_substeps`]); 0: `substeps`.
+    pub substeps_max: u32,
     /// Solver iterations per physics step (each recomputes the multibody's mass matrix).
     pub solver_iterations: usize,
     /// Inner PGS iterations per solver iteration (cheap: no mass-matrix update).
@@ -119,6 +123,7 @@ impl Default for SimSettings {
         let physics = protocol::Physics::default();
         Self {
             substeps: physics.substeps,
+            substeps_max: physics.substeps_max,
             solver_iterations: physics.solver_iterations as usize,
             pgs_iterations: physics.pgs_iterations as usize,
             friction: 1.0,
@@ -158,6 +163,7 @@ impl SimSettings {
     pub fn with_physics(physics: &protocol::Physics) -> Self {
         Self {
             substeps: physics.substeps,
+            substeps_max: physics.substeps_max,
             solver_iterations: physics.solver_iterations as usize,
             pgs_iterations: physics.pgs_iterations as usize,
             armature_kg_m2: physics.armature_kg_m2,

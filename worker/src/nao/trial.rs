@@ -141,7 +141,26 @@ pub struct NaoTrial {
     /// The distance walked split by what the feet did (over the cycles run;
     /// a diverged trial's up to its last sane cycle).
     pub footwork: Footwork,
+    /// Physics steps per cycle it ran at ([`drawn_substeps`]).
+    pub substeps: u32,
 }
+
+/// The physics steps per cycle trial `seed` runs at with `settings`: its
+/// `substeps`, or with a band (`substeps_max` above it) a draw from
+/// `substeps..=substeps_max`, uniform, by a stream of the seed's own, so the
+/// trial's noise is the same as at a fixed step.
+#[must_use]
+pub fn drawn_substeps(settings: &SimSettings, seed: u64) -> u32 {
+    if settings.substeps_max <= settings.substeps {
+        return settings.substeps;
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    rng.set_stream(SUBSTEPS_STREAM);
+    rng.random_range(settings.substeps..=settings.substeps_max)
+}
+
+/// The ChaCha stream [`drawn_substeps`] draws from (the trial's noise uses 0).
+const SUBSTEPS_STREAM: u64 = 1;
 
 /// How often a joint's commanded speed was beyond its cap during a trial:
 /// the servo then turned at the cap and the joint lagged its target.
@@ -300,6 +319,8 @@ pub fn run_observed(
     engine: Engine,
     observe: &mut dyn FnMut(&Sim, &Perception, &[f64]),
 ) -> Result<NaoTrial, NaoTrialError> {
+    settings.substeps = drawn_substeps(&settings, seed);
+    settings.substeps_max = 0;
     let model = NaoModel::with_params(robot_type, params)?;
     let walk: WalkParams = params.walk();
     let cfg = engine.gait.with_params(params);
@@ -387,6 +408,7 @@ pub fn run_observed(
                     speed_capped: capped.list(&model),
                     cycles: run,
                     footwork: footwork.footwork(),
+                    substeps: settings.substeps,
                 });
             }
             Err(e) => return Err(e.into()),
@@ -416,6 +438,7 @@ pub fn run_observed(
         speed_capped: capped.list(&model),
         cycles: run,
         footwork: footwork.footwork(),
+        substeps: settings.substeps,
     })
 }
 
@@ -594,6 +617,49 @@ mod tests {
             assert_eq!(t.measurement.x_m.to_bits(), f64::to_bits(x), "seed {seed}");
             assert_eq!(t.measurement.y_m.to_bits(), f64::to_bits(y), "seed {seed}");
         }
+    }
+
+    /// A band of physics steps (`[physics] substeps_max`): each trial draws
+    /// its step from the band by its seed, the same every time; over 30
+    /// seeds every step of a small band comes up; and a banded trial is bit
+    /// for bit the trial run at its drawn step, its noise untouched by the
+    /// draw. Without a band the step is the fixed one.
+    #[test]
+    fn a_banded_trial_is_the_trial_at_its_drawn_step() {
+        let band = SimSettings {
+            substeps: 2,
+            substeps_max: 4,
+            ..SimSettings::default()
+        };
+        let draw = || {
+            (0..30)
+                .map(|s| drawn_substeps(&band, s))
+                .collect::<Vec<_>>()
+        };
+        let drawn = draw();
+        assert_eq!(drawn, draw());
+        for k in 2..=4 {
+            assert!(drawn.contains(&k), "{k} never drawn: {drawn:?}");
+        }
+        assert!(drawn.iter().all(|k| (2..=4).contains(k)), "{drawn:?}");
+        assert_eq!(drawn_substeps(&SimSettings::default(), 5), 2);
+        let mut steps = Vec::new();
+        for seed in [11, 12, 13, 14] {
+            let banded = run(0, &ParamValues::default(), seed, 3.0, band, OPEN).unwrap();
+            let k = drawn_substeps(&band, seed);
+            assert_eq!(banded.substeps, k);
+            let fixed = SimSettings {
+                substeps: k,
+                ..SimSettings::default()
+            };
+            assert_eq!(
+                banded,
+                run(0, &ParamValues::default(), seed, 3.0, fixed, OPEN).unwrap(),
+                "seed {seed} at {k} steps"
+            );
+            steps.push(k);
+        }
+        println!("seeds 11-14 drew {steps:?}");
     }
 
     #[test]
