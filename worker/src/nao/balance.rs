@@ -369,6 +369,18 @@ mod tests {
         (exp, physics, expert)
     }
 
+    /// A set a run of `exp` found, `found` naming every parameter of the
+    /// file in its order, checked inside L, with the file's fixed values: as
+    /// a worker gets it.
+    fn found_in(exp: &protocol::Experiment, found: &[(&str, f64)]) -> ParamValues {
+        let names: Vec<&str> = exp.parameter.iter().map(|p| p.name.as_str()).collect();
+        let given: Vec<&str> = found.iter().map(|(n, _)| *n).collect();
+        assert_eq!(names, given, "the file's parameters, in order");
+        let values: Vec<f64> = found.iter().map(|(_, v)| *v).collect();
+        exp.check_in_space(&values).unwrap();
+        ParamValues::from_named(&exp.full_params(&values)).unwrap()
+    }
+
     /// `exp`'s expert set with its fixed values, as a worker gets it.
     fn expert_of(exp: &protocol::Experiment) -> ParamValues {
         ParamValues::from_named(&exp.full_params(&exp.expert_values())).unwrap()
@@ -1122,8 +1134,7 @@ mod tests {
             ("xlength_step_max", 0.127_474_929_742_425_77),
             ("step_period", 0.152_911_190_106_561_3),
         ];
-        exp.check_in_space(&found.map(|(_, v)| v)).unwrap();
-        let optim = ParamValues::from_named(&exp.full_params(&found.map(|(_, v)| v))).unwrap();
+        let optim = found_in(&exp, &found);
         let at = |substeps: u32| {
             twenty_from_777(
                 &optim,
@@ -1171,8 +1182,7 @@ mod tests {
             ("xlength_step_max", 0.082_196_565_978_954_21),
             ("step_period", 0.132_082_156_487_145_4),
         ];
-        exp.check_in_space(&found.map(|(_, v)| v)).unwrap();
-        let optim = ParamValues::from_named(&exp.full_params(&found.map(|(_, v)| v))).unwrap();
+        let optim = found_in(&exp, &found);
         for substeps in [16, 20, 30] {
             let fixed = SimSettings {
                 substeps,
@@ -1230,14 +1240,7 @@ mod tests {
             ("xlength_step_max", 0.085_220_683_185_753_74),
             ("step_period", 0.122_157_409_483_154_03),
         ];
-        let names: Vec<&str> = exp.parameter.iter().map(|p| p.name.as_str()).collect();
-        assert_eq!(
-            names,
-            found.map(|(n, _)| n),
-            "the file's parameters, in order"
-        );
-        exp.check_in_space(&found.map(|(_, v)| v)).unwrap();
-        let optim = ParamValues::from_named(&exp.full_params(&found.map(|(_, v)| v))).unwrap();
+        let optim = found_in(&exp, &found);
         let (ts, s, mx, planned) = walks_at_pace_as_planned(&optim, 100, physics);
         assert!(s >= 0.9, "s = {s}");
         assert!(mx >= 6.0, "mx = {mx}");
