@@ -1029,29 +1029,22 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("ThighRelHip2_Z"), "{e}");
-        let r = TrialRequest {
-            params: vec![("ThighRelHip2_Z".into(), -0.04)],
-            physics: Physics {
-                substeps: 0,
-                ..Physics::default()
-            },
-            ..r
-        };
-        let e = TrialRequest::decode(&r.encode().unwrap())
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("substeps"), "{e}");
-        let r = TrialRequest {
-            physics: Physics {
-                substeps: 20,
-                substeps_max: 16,
-                ..Physics::default()
-            },
-            ..r
-        };
-        let e = TrialRequest::decode(&r.encode().unwrap())
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("substeps_max"), "{e}");
+        // Physics out of range, each refused naming its field: no steps, and
+        // a band below its own bottom.
+        for (physics, field) in [((0, 0), "substeps"), ((20, 16), "substeps_max")] {
+            let r = TrialRequest {
+                params: vec![("ThighRelHip2_Z".into(), -0.04)],
+                physics: Physics {
+                    substeps: physics.0,
+                    substeps_max: physics.1,
+                    ..Physics::default()
+                },
+                ..r.clone()
+            };
+            let e = TrialRequest::decode(&r.encode().unwrap())
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(field), "{e}");
+        }
     }
 }
