@@ -801,6 +801,7 @@ expert = -0.04
             "physical-technical-converged-period.toml",
             "physical-technical-converged-period-1ms.toml",
             "physical-technical-converged-period-band.toml",
+            "physical-converged-band.toml",
             "physical-stiff.toml",
             "physical-firm.toml",
             "physical-technical-stiff.toml",
@@ -821,7 +822,8 @@ expert = -0.04
             // from 1.25 to 0.67 ms; every other file at one step.
             let band = match f {
                 "physical-technical-converged-period-1ms.toml" => (20, 0),
-                "physical-technical-converged-period-band.toml" => (16, 30),
+                "physical-technical-converged-period-band.toml"
+                | "physical-converged-band.toml" => (16, 30),
                 _ => (e.physics.substeps, 0),
             };
             assert_eq!((e.physics.substeps, e.physics.substeps_max), band, "{f}");

@@ -337,6 +337,8 @@ struct Row {
     motion: &'static str,
     settings: SimSettings,
     sim_s: f64,
+    /// Physics steps taken: a banded file's row runs walks at several steps.
+    steps: f64,
     wall_s: f64,
     /// CPU time of the measuring thread: unlike the wall time, it leaves
     /// out the time other processes of a shared machine had the core.
@@ -368,6 +370,7 @@ fn measure_stand(settings: SimSettings, seconds: f64) -> Result<Row, Failure> {
         motion: "stand",
         settings,
         sim_s: p.time_s,
+        steps: p.time_s / CYCLE_S * f64::from(settings.substeps),
         wall_s: t0.elapsed().as_secs_f64(),
         cpu_s: thread_cpu_s() - cpu0,
         fell,
@@ -399,6 +402,7 @@ fn measure_walk(
         },
         settings,
         sim_s: t.measurement.sim_time_s,
+        steps: t.measurement.sim_time_s / CYCLE_S * f64::from(settings.substeps),
         wall_s: t0.elapsed().as_secs_f64(),
         cpu_s: thread_cpu_s() - cpu0,
         fell: t.measurement.fell,
@@ -426,7 +430,7 @@ impl FileWalk {
 }
 
 /// The files `bench sim` measures, the converged first.
-const FILES: [FileWalk; 5] = [
+const FILES: [FileWalk; 6] = [
     // Converged physics with its fixed values.
     FileWalk {
         text: include_str!("../../experiments/physical-technical-converged.toml"),
@@ -457,22 +461,49 @@ const FILES: [FileWalk; 5] = [
         key: "arms_5ms",
         label: "arms 5 ms file: the arms file's at 4x5ms",
     },
+    // The step-period file with each trial's step drawn from a band.
+    FileWalk {
+        text: include_str!("../../experiments/physical-technical-converged-period-band.toml"),
+        key: "band",
+        label: "band file: each of 16-30 steps per cycle",
+    },
 ];
 
 /// The walk of a shipped experiment file, as the file sets it (its physics
 /// and its fixed values, with its expert set), measured like the others.
+/// A file with a band of steps walks once at each step of its band, and its
+/// row sums them: the farm's trials draw their steps uniformly from the
+/// band, so that is what a trial costs on average.
 fn measure_file_walk(f: &FileWalk, seconds: f64) -> Result<Row, Failure> {
     let bad = |e: String| Failure::Job(anyhow!("the {} experiment file: {e}", f.name()));
     let file = protocol::Experiment::from_toml(f.text).map_err(|e| bad(e.to_string()))?;
     let params = ParamValues::from_named(&file.full_params(&file.expert_values()))
         .map_err(|e| bad(e.to_string()))?;
-    let mut r = measure_walk(
-        SimSettings::with_physics(&file.physics),
-        seconds,
-        file.walk,
-        &params,
-    )?;
+    let settings = SimSettings::with_physics(&file.physics);
+    let top = settings.substeps.max(settings.substeps_max);
+    let mut sum: Option<Row> = None;
+    for substeps in settings.substeps..=top {
+        let fixed = SimSettings {
+            substeps,
+            substeps_max: 0,
+            ..settings
+        };
+        let r = measure_walk(fixed, seconds, file.walk, &params)?;
+        sum = Some(match sum {
+            None => r,
+            Some(t) => Row {
+                sim_s: t.sim_s + r.sim_s,
+                steps: t.steps + r.steps,
+                wall_s: t.wall_s + r.wall_s,
+                cpu_s: t.cpu_s + r.cpu_s,
+                fell: t.fell || r.fell,
+                ..t
+            },
+        });
+    }
+    let mut r = sum.ok_or_else(|| bad("no physics steps".into()))?;
     r.label = f.label.into();
+    r.settings = settings;
     Ok(r)
 }
 
@@ -591,7 +622,7 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
     }
     let rtf = |r: &Row| r.sim_s / r.wall_s;
     let cpu_rtf = |r: &Row| r.sim_s / r.cpu_s;
-    let sps = |r: &Row| r.sim_s / CYCLE_S * f64::from(r.settings.substeps) / r.wall_s;
+    let sps = |r: &Row| r.steps / r.wall_s;
     // Each measurement's row of median real-time factor.
     let rows: Vec<&Row> = runs
         .iter()
@@ -657,6 +688,7 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
                 "settings": r.label,
                 "motion": r.motion,
                 "substeps": r.settings.substeps,
+                "substeps_max": r.settings.substeps_max,
                 "solver_iterations": r.settings.solver_iterations,
                 "pgs_iterations": r.settings.pgs_iterations,
                 "weld_upper_body": r.settings.weld_upper_body,
