@@ -1160,7 +1160,8 @@ mod tests {
     /// the best set experiment 2 with the step period found with each
     /// trial's step drawn from 1.25 to 0.67 ms
     /// (`experiments/physical-technical-converged-period-band.toml`, Optim.1
-    /// of iteration 448 as `naofarm report` printed it) walks the issue's
+    /// of iteration 448 as `naofarm report` printed it, in its first run,
+    /// with the file's expert period at 0.18 s) walks the issue's
     /// 6.0 m at the band's ends and middle, each step fixed, upright and
     /// by stepping. Measured (100 trials from seed 777): 6.235, 6.396 and
     /// 6.321 m at 1.25, 1 and 0.67 ms, s 1.00, torso −1.5° to −0.5°.
