@@ -791,6 +791,28 @@ expert = -0.04
         assert!(msg.contains("line 2"), "{msg}");
     }
 
+    /// Experiment 1 on the band walks with experiment 2's expert there: its
+    /// one parameter's bounds aside, the two files give a worker the same
+    /// values and physics.
+    #[test]
+    fn the_band_files_share_their_expert_and_physics() {
+        let read = |f: &str| {
+            let path = format!("{}/../experiments/{f}", env!("CARGO_MANIFEST_DIR"));
+            Experiment::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap()
+        };
+        let one = read("physical-converged-band.toml");
+        let two = read("physical-technical-converged-period-band.toml");
+        let values = |e: &Experiment| -> BTreeMap<String, f64> {
+            e.full_params(&e.expert_values()).into_iter().collect()
+        };
+        assert_eq!(values(&one), values(&two));
+        assert_eq!(one.physics, two.physics);
+        assert_eq!(
+            (one.walk, one.pickout, one.clop),
+            (two.walk, two.pickout, two.clop)
+        );
+    }
+
     #[test]
     fn shipped_experiments_parse() {
         for f in [
