@@ -480,9 +480,8 @@ fn measure_file_walk(f: &FileWalk, seconds: f64) -> Result<Row, Failure> {
     let params = ParamValues::from_named(&file.full_params(&file.expert_values()))
         .map_err(|e| bad(e.to_string()))?;
     let settings = SimSettings::with_physics(&file.physics);
-    let top = settings.substeps.max(settings.substeps_max);
     let mut sum: Option<Row> = None;
-    for substeps in settings.substeps..=top {
+    for substeps in settings.substeps_band() {
         let fixed = SimSettings {
             substeps,
             substeps_max: 0,

@@ -76,7 +76,9 @@ impl WorkerConfig {
             ));
         }
         // A band's trials may draw up to its top.
-        let most = req.physics.substeps.max(req.physics.substeps_max);
+        let most = *crate::nao::sim::SimSettings::with_physics(&req.physics)
+            .substeps_band()
+            .end();
         if most > self.max_substeps {
             return Some(format!(
                 "{most} physics substeps are beyond this worker's limit of {}",

@@ -149,6 +149,13 @@ impl Default for SimSettings {
 }
 
 impl SimSettings {
+    /// The physics steps per cycle a trial may run at: `substeps..=substeps_max`
+    /// with a band, else `substeps` alone.
+    #[must_use]
+    pub fn substeps_band(&self) -> std::ops::RangeInclusive<u32> {
+        self.substeps..=self.substeps.max(self.substeps_max)
+    }
+
     /// Whether these settings weld the hinge named `name` at its start angle.
     #[must_use]
     pub fn welds(&self, name: &str) -> bool {

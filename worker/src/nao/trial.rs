@@ -151,12 +151,13 @@ pub struct NaoTrial {
 /// trial's noise is the same as at a fixed step.
 #[must_use]
 pub fn drawn_substeps(settings: &SimSettings, seed: u64) -> u32 {
-    if settings.substeps_max <= settings.substeps {
+    let band = settings.substeps_band();
+    if band.start() == band.end() {
         return settings.substeps;
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     rng.set_stream(SUBSTEPS_STREAM);
-    rng.random_range(settings.substeps..=settings.substeps_max)
+    rng.random_range(band)
 }
 
 /// The ChaCha stream [`drawn_substeps`] draws from (the trial's noise uses 0).
