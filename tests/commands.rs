@@ -477,10 +477,44 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
         assert!(w["plants"].as_u64().is_some(), "{t}");
     }
     assert!(a["planned_m"].as_f64().is_some_and(|p| p > 0.0), "{a}");
+    assert_eq!(a["planned_step_m"].as_f64(), Some(0.08), "{a}");
+    // A step the swing hip cannot turn within its speed cap, capped by
+    // `step_reach` and said so; without it, the step asked.
+    let long = |reach: &str, json: bool| {
+        let mut c = naofarm();
+        c.args([
+            "trial",
+            "--walk",
+            "closed-loop",
+            "--trials",
+            "1",
+            "--duration",
+            "1",
+        ]);
+        c.args(["--param", "xlength_step_max=0.15", "--param", reach]);
+        if json {
+            c.arg("--json");
+        }
+        succeed(&mut c).stdout
+    };
+    let step = |reach: &str| {
+        let v: serde_json::Value = serde_json::from_slice(&long(reach, true)).unwrap();
+        v["planned_step_m"].as_f64().unwrap()
+    };
+    assert_eq!(step("step_reach=0"), 0.15);
+    let capped = step("step_reach=1");
+    assert!(capped > 0.02 && capped < 0.15, "{capped}");
+    let text = String::from_utf8(long("step_reach=1", false)).unwrap();
+    assert!(text.contains("capped by step_reach"), "{text}");
     let b = run("5");
     assert_eq!(a["mx"], b["mx"]);
     assert_eq!(a["trials"], b["trials"]);
-    for bad in ["ratio_flexion=7", "Bogus=1", "height_lift=nan"] {
+    for bad in [
+        "ratio_flexion=7",
+        "Bogus=1",
+        "height_lift=nan",
+        "step_reach=-1",
+    ] {
         let out = naofarm()
             .args(["trial", "--trials", "1", "--param", bad])
             .output()

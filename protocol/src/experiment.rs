@@ -824,6 +824,7 @@ expert = -0.04
             "physical-technical-converged-period-1ms.toml",
             "physical-technical-converged-period-band.toml",
             "physical-converged-band.toml",
+            "physical-technical-converged-period-band-reach.toml",
             "physical-stiff.toml",
             "physical-firm.toml",
             "physical-technical-stiff.toml",
@@ -845,11 +846,15 @@ expert = -0.04
             let band = match f {
                 "physical-technical-converged-period-1ms.toml" => (20, 0),
                 "physical-technical-converged-period-band.toml"
-                | "physical-converged-band.toml" => (16, 30),
+                | "physical-converged-band.toml"
+                | "physical-technical-converged-period-band-reach.toml" => (16, 30),
                 _ => (e.physics.substeps, 0),
             };
             assert_eq!((e.physics.substeps, e.physics.substeps_max), band, "{f}");
-            if f.ends_with("band.toml") {
+            // Only the reach file caps the plan's steps.
+            let reach = f.ends_with("band-reach.toml").then_some(&1.0);
+            assert_eq!(e.fixed.get("step_reach"), reach, "{f}");
+            if f.contains("band") {
                 assert!(e
                     .physics
                     .to_string()

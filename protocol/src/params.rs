@@ -56,6 +56,8 @@ pub enum Param {
     ArmSwing,
     /// `turn_place`.
     TurnPlace,
+    /// `step_reach`.
+    StepReach,
 }
 
 impl Param {
@@ -271,6 +273,17 @@ pub const KNOWN: &[KnownParam] = &[
         unit: "rad/rad",
         default: 0.0,
         doc: "the feet placed against this share of the torso's sensed turn about the vertical (1: where the plan has them in the walk's frame); not given, the closed-loop engine's own (0: in the torso's frame)",
+    },
+    // What the plan may ask of the swing.
+    KnownParam {
+        param: Param::StepReach,
+        name: "step_reach",
+        role: Role::Walk,
+        min: 0.0,
+        max: 5.0,
+        unit: "1",
+        default: 0.0,
+        doc: "the planned step shortened until the swing hip's mean pitch rate (2 x step / (hip height x swing time)) is at most this many times its speed cap; not given, every engine's own (0: the step xlength_step_max asks)",
     },
 ];
 

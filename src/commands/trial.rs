@@ -154,6 +154,8 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     let diverged = runs.iter().filter(|t| t.diverged).count();
     let planned = trial::planned_travel_m(robot_type, &values, duration, engine)
         .map_err(|e| Failure::Job(e.into()))?;
+    let step =
+        trial::planned_step_m(robot_type, &values, engine).map_err(|e| Failure::Job(e.into()))?;
     // Over the trials that did not fall, the ones mx averages.
     let split = Footwork::mean(
         runs.iter()
@@ -173,6 +175,7 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             "ex": s.ex,
             "ey": s.ey,
             "planned_m": planned,
+            "planned_step_m": step,
             "footwork": split,
             "trials": runs.iter().map(trial_json).collect::<Vec<_>>(),
             "diverged": diverged,
@@ -203,7 +206,15 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             f(s.ex),
             f(s.ey)
         );
-        outln!("the walk's plan: {planned:.3} m");
+        let asked = values.walk().step_length;
+        if step < asked {
+            outln!(
+                "the walk's plan: {planned:.3} m, in steps of {step:.4} m \
+                 (xlength_step_max {asked:.4} m, capped by step_reach)"
+            );
+        } else {
+            outln!("the walk's plan: {planned:.3} m, in steps of {step:.4} m");
+        }
         if let Some(w) = &split {
             outln!(
                 "mx split by the feet: stepping {:.3} m, sliding {:.3} m, lean {:.3} m; \

@@ -73,6 +73,7 @@ pub const GAIT: GaitConfig = GaitConfig {
     lift_end: 1.0,
     yaw_pitch_rad: 0.0,
     arm_swing_rad: 0.0,
+    step_reach: 0.0,
 };
 
 /// Time constant of the tilt estimate's pull towards the accelerometer, s.

@@ -194,7 +194,8 @@ impl Morphology {
             | Param::AnklePitchGain
             | Param::HipRollComp
             | Param::ArmSwing
-            | Param::TurnPlace => None,
+            | Param::TurnPlace
+            | Param::StepReach => None,
         }
     }
 

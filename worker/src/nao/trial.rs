@@ -286,6 +286,18 @@ pub fn planned_travel_m(
     Ok(gait.state(duration_s).hip[0] - gait.state(0.0).hip[0])
 }
 
+/// The full step the walk's plan takes, m: `xlength_step_max`, or shorter
+/// where the engine's `step_reach` caps it ([`super::walk::reachable_step`]).
+pub fn planned_step_m(
+    robot_type: u8,
+    params: &ParamValues,
+    engine: Engine,
+) -> Result<f64, NaoTrialError> {
+    let model = NaoModel::with_params(robot_type, params)?;
+    let gait = Gait::with_config(&model, params.walk(), 0.0, engine.gait.with_params(params));
+    Ok(gait.step_length())
+}
+
 /// Runs one trial of parameter set `params` (named; unset ones at expert).
 pub fn run(
     robot_type: u8,

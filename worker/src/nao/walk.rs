@@ -31,6 +31,10 @@
 //!   (expert set, no noise, 2 × 10 ms steps): 0 → 0.54 m, 0.10 → 1.25 m,
 //!   0.20 → 1.6–1.8 m (the plan's 1.75 m), 0.25 → more lateral drift.
 //! - Stepping starts at [`START_S`] 0.5 s after a still start.
+//! - Step reach (`GaitConfig::step_reach`) 0: the step is the one asked.
+//!   An experiment may cap it at what the swing hip turns within its speed
+//!   cap (`step_reach = 1`): measured on the band's optima, they then walk
+//!   1.04–1.07 × their plan instead of 0.80–0.88 ×, as far as before.
 //! - No sensor feedback: the gait is open loop; the servos get the target plus
 //!   a velocity feed-forward (without it the P servo lags ~0.12 s, a third of
 //!   a step, and motions shrink).
@@ -96,6 +100,14 @@ pub struct GaitConfig {
     /// measuring): the arms' swing carries angular momentum about the
     /// vertical against the legs' (docs/walk.md, "The torso's yaw").
     pub arm_swing_rad: f64,
+    /// Cap on the planned step: the step is shortened until the swing
+    /// hip's mean pitch rate, 2 × step ÷ (hip height × swing time), is at
+    /// most this many times the hip pitch's speed cap (the league's
+    /// 6.14 rad/s); 0: no cap, the step `xlength_step_max` asks (every
+    /// engine's own, and every file's before session 29). The registry's
+    /// `step_reach` sets it: a plan the legs cannot swing is walked short of
+    /// itself (docs/walk.md, "A plan the legs can swing").
+    pub step_reach: f64,
 }
 
 /// How the swing foot travels forward over single support (s in 0..1, as a
@@ -149,10 +161,12 @@ impl GaitConfig {
         lift_end: 1.0,
         yaw_pitch_rad: 0.0,
         arm_swing_rad: 0.0,
+        step_reach: 0.0,
     };
 
     /// These constants with the parameter set's `step_period`,
-    /// `double_support`, `com_above_hip`, `hip_roll_comp` and `arm_swing`,
+    /// `double_support`, `com_above_hip`, `hip_roll_comp`, `arm_swing` and
+    /// `step_reach`,
     /// where it gives them (the
     /// registry's walk-engine parameters; an experiment may fix or optimise
     /// them).
@@ -170,12 +184,36 @@ impl GaitConfig {
                 .given(Param::HipRollComp)
                 .unwrap_or(self.hip_roll_comp_rad),
             arm_swing_rad: params.given(Param::ArmSwing).unwrap_or(self.arm_swing_rad),
+            step_reach: params.given(Param::StepReach).unwrap_or(self.step_reach),
             ..self
         }
     }
 }
 
 pub use protocol::params::WalkParams;
+
+/// The step the plan takes for an asked `step_length`: the asked one when
+/// `cfg.step_reach` is 0 (the bits of every walk before it), else at most
+/// the step whose swing turns the hip, on average, `step_reach` × the hip
+/// pitch's speed cap: the foot travels twice the step relative to the hip
+/// in a swing of `period × (1 − double_support)`, about a pendulum of the
+/// hip's height.
+#[must_use]
+pub fn reachable_step(
+    model: &NaoModel,
+    step_length: f64,
+    hip_height: f64,
+    cfg: &GaitConfig,
+) -> f64 {
+    if cfg.step_reach <= 0.0 {
+        return step_length;
+    }
+    let cap = model
+        .joint_index("lle3")
+        .map_or(super::model::MAX_SPEED, |i| model.joints[i].max_speed_rad_s);
+    let swing_s = cfg.period_s * (1.0 - cfg.double_support);
+    step_length.min(cfg.step_reach * cap * hip_height * swing_s / 2.0)
+}
 
 /// Leg geometry for the IK, from the morphology.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -345,6 +383,10 @@ impl Gait {
     pub fn with_config(model: &NaoModel, p: WalkParams, duration_s: f64, cfg: GaitConfig) -> Self {
         let leg = Leg::of(model);
         let hip_height = p.ratio_flexion * (leg.thigh + leg.tibia) + PITCH_ABOVE_ROLL;
+        let p = WalkParams {
+            step_length: reachable_step(model, p.step_length, hip_height, &cfg),
+            ..p
+        };
         let zc = hip_height + ANKLE_H + cfg.com_above_hip_m;
         let tc = (zc / G).sqrt();
         let foot_y = leg.hip[1];
@@ -375,6 +417,12 @@ impl Gait {
         };
         g.plan_com(duration_s, tc);
         g
+    }
+
+    /// The full step this plan takes, m (the asked one, or its reach).
+    #[must_use]
+    pub fn step_length(&self) -> f64 {
+        self.p.step_length
     }
 
     /// The ZMP plan at time t: support-foot centre, handed over linearly during
@@ -817,6 +865,56 @@ mod tests {
         let k = START_S + 3.0 * 0.22;
         assert!(at(k).iter().all(|v| v.is_finite()));
         assert_eq!(at(k + 1e-9), at(k + 0.1));
+    }
+
+    /// `step_reach` shortens a step whose swing would turn the hip, on
+    /// average, faster than `step_reach` x its speed cap, to exactly that
+    /// step, and leaves shorter steps and every step without it (0) as
+    /// asked; the first two steps stay half the (capped) step.
+    #[test]
+    fn step_reach_caps_the_planned_step_at_the_hips_speed_cap() {
+        let model = NaoModel::new(Morphology::of_type(0).unwrap()).unwrap();
+        let mut p = ParamValues::default();
+        p.set(Param::StepReach, 1.0).unwrap();
+        let capped = GaitConfig {
+            period_s: 0.14,
+            double_support: 0.0,
+            ..GaitConfig::OPEN_LOOP
+        }
+        .with_params(&p);
+        assert_eq!(capped.step_reach, 1.0);
+        let free = GaitConfig {
+            step_reach: 0.0,
+            ..capped
+        };
+        let full_step = |g: &Gait| (g.steps[1], g.steps[4] - g.steps[3]);
+        let hip_rate = |g: &Gait, step: f64| 2.0 * step / (g.hip_height * g.cfg.period_s);
+        let cap = model.joints[model.joint_index("lle3").unwrap()].max_speed_rad_s;
+        for asked in [0.05, 0.12, 0.15] {
+            let walk = WalkParams {
+                step_length: asked,
+                ..WalkParams::EXPERT
+            };
+            let g = Gait::with_config(&model, walk, 3.0, capped);
+            let (first, full) = full_step(&g);
+            assert!((first - full / 2.0).abs() < 1e-12, "{first} {full}");
+            let rate = hip_rate(&g, asked);
+            if rate <= cap {
+                assert!(
+                    (full - asked).abs() < 1e-12,
+                    "{asked}: {full} at {rate} rad/s"
+                );
+            } else {
+                assert!(full < asked);
+                assert!((hip_rate(&g, full) - cap).abs() < 1e-9, "{asked}: {full}");
+            }
+            let free_full = full_step(&Gait::with_config(&model, walk, 3.0, free)).1;
+            assert!((free_full - asked).abs() < 1e-12, "{asked}: {free_full}");
+        }
+        // The two longer steps are beyond the cap at this period: the test
+        // covers both branches.
+        let g = Gait::with_config(&model, WalkParams::EXPERT, 3.0, capped);
+        assert!(hip_rate(&g, 0.05) < cap && hip_rate(&g, 0.12) > cap);
     }
 
     /// Arm swing turns each shoulder pitch against its opposite leg, by the
