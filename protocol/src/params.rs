@@ -283,7 +283,7 @@ pub const KNOWN: &[KnownParam] = &[
         max: 5.0,
         unit: "1",
         default: 0.0,
-        doc: "the planned step shortened until the swing hip's mean pitch rate (2 x step / (hip height x swing time)) is at most this many times its speed cap; not given, every engine's own (0: the step xlength_step_max asks)",
+        doc: "the planned step shortened until the thighs part in a swing, on average (2 x step / (hip height x swing time)), at most this many times the hip pitch's speed cap; not given, every engine's own (0: the step xlength_step_max asks)",
     },
 ];
 

@@ -1280,6 +1280,69 @@ mod tests {
         assert!((mx - planned).abs() <= 0.1 * planned, "{mx} of {planned}");
     }
 
+    /// Experiment 2 on the band with the plan capped at the legs' reach
+    /// (session 29's run of
+    /// `experiments/physical-technical-converged-period-band-reach.toml`,
+    /// seed 1; Optim.1 and Optim.2 as `naofarm report` printed them). Both
+    /// ask for steps the cap shortens, and both walk the 6.0 m over
+    /// the band's draw (measured, 100 trials from 777: 6.211 m and
+    /// 6.100 m, s 1.00), straight and within 1° of every stop. Now they walk
+    /// *beyond* their plan, by stepping: Optim.2 1.09 × (within the 10 %),
+    /// Optim.1 1.11 × (just outside it), where the uncapped band run's
+    /// optimum walked 0.80 ×.
+    #[test]
+    fn the_reach_runs_optima_walk_six_metres_by_about_their_plan() {
+        let (exp, physics, _) = shipped(include_str!(
+            "../../../experiments/physical-technical-converged-period-band-reach.toml"
+        ));
+        let optim1 = found_in(
+            &exp,
+            &[
+                ("ThighRelHip2_Z", -0.07936676058858248),
+                ("ratio_flexion", 0.7391661615035853),
+                ("long_offset_MidAnkles_2_Torso_Init", 0.006439725736962886),
+                ("height_lift", 0.04338248345381031),
+                ("xlength_step_max", 0.1326148376608648),
+                ("step_period", 0.13522526092746529),
+            ],
+        );
+        let optim2 = found_in(
+            &exp,
+            &[
+                ("ThighRelHip2_Z", -0.07706498953106387),
+                ("ratio_flexion", 0.7398127868480532),
+                ("long_offset_MidAnkles_2_Torso_Init", 0.01233662393993597),
+                ("height_lift", 0.042057196189412276),
+                ("xlength_step_max", 0.11405149474763805),
+                ("step_period", 0.1314131670876751),
+            ],
+        );
+        for optim in [&optim1, &optim2] {
+            let step = trial::planned_step_m(0, optim, closed()).unwrap();
+            assert!(step < optim.walk().step_length - 0.02, "{step}");
+        }
+        let (ts, s, mx, planned) = walks_at_pace_within_the_stops(&optim2, 100, physics);
+        println!("Optim.2: s {s}, {mx:.3} m of {planned:.3} m planned");
+        assert!(s >= 0.9 && mx >= 6.0 && mx > planned, "{s} {mx} {planned}");
+        // Beyond the plan by stepping: the feet slide less than 2 % of it.
+        let sliding = ts.iter().map(|t| t.footwork.sliding_m).sum::<f64>() / ts.len() as f64;
+        assert!(sliding.abs() < 0.02 * mx, "{sliding}");
+        let batch = Batch {
+            seed0: 777,
+            n: 100,
+            threads: 2,
+        };
+        let ts = run_many(0, &optim1, batch, 10.0, physics, closed()).unwrap();
+        let (s, mx, my) = summary(&ts);
+        let planned = trial::planned_travel_m(0, &optim1, 10.0, closed()).unwrap();
+        println!("Optim.1: s {s}, {mx:.3} m of {planned:.3} m planned");
+        assert!(s >= 0.9 && mx >= 6.0 && my / mx <= 0.25, "{s} {mx} {my}");
+        assert!((1.10..1.12).contains(&(mx / planned)), "{mx} of {planned}");
+        for t in &ts {
+            assert!(t.stop_excess.iter().all(|e| e.rad.to_degrees() <= 1.0));
+        }
+    }
+
     /// The pace issue's 6.0 m, reached on converged physics with the step
     /// period co-optimised (`experiments/physical-technical-converged-period.toml`):
     /// the best set its 500 iterations found (Optim.1, iteration 369, as

@@ -32,9 +32,10 @@
 //!   0.20 → 1.6–1.8 m (the plan's 1.75 m), 0.25 → more lateral drift.
 //! - Stepping starts at [`START_S`] 0.5 s after a still start.
 //! - Step reach (`GaitConfig::step_reach`) 0: the step is the one asked.
-//!   An experiment may cap it at what the swing hip turns within its speed
-//!   cap (`step_reach = 1`): measured on the band's optima, they then walk
-//!   1.04–1.07 × their plan instead of 0.80–0.88 ×, as far as before.
+//!   An experiment may cap it where the thighs would part faster than the
+//!   hip pitch's speed cap (`step_reach = 1`): measured on the band's
+//!   optima, they then walk 1.04–1.07 × their plan instead of 0.80–0.93 ×,
+//!   as far as before.
 //! - No sensor feedback: the gait is open loop; the servos get the target plus
 //!   a velocity feed-forward (without it the P servo lags ~0.12 s, a third of
 //!   a step, and motions shrink).
@@ -100,10 +101,11 @@ pub struct GaitConfig {
     /// measuring): the arms' swing carries angular momentum about the
     /// vertical against the legs' (docs/walk.md, "The torso's yaw").
     pub arm_swing_rad: f64,
-    /// Cap on the planned step: the step is shortened until the swing
-    /// hip's mean pitch rate, 2 × step ÷ (hip height × swing time), is at
-    /// most this many times the hip pitch's speed cap (the league's
-    /// 6.14 rad/s); 0: no cap, the step `xlength_step_max` asks (every
+    /// Cap on the planned step: the step is shortened until the mean rate
+    /// at which the thighs part in a swing, 2 × step ÷ (hip height × swing
+    /// time), is at most this many times the hip pitch's speed cap (the
+    /// league's 6.14 rad/s; each hip turns about half that rate against
+    /// the torso, and the swing's knee more); 0: no cap, the step `xlength_step_max` asks (every
     /// engine's own, and every file's before session 29). The registry's
     /// `step_reach` sets it: a plan the legs cannot swing is walked short of
     /// itself (docs/walk.md, "A plan the legs can swing").
@@ -194,10 +196,12 @@ pub use protocol::params::WalkParams;
 
 /// The step the plan takes for an asked `step_length`: the asked one when
 /// `cfg.step_reach` is 0 (the bits of every walk before it), else at most
-/// the step whose swing turns the hip, on average, `step_reach` × the hip
-/// pitch's speed cap: the foot travels twice the step relative to the hip
-/// in a swing of `period × (1 − double_support)`, about a pendulum of the
-/// hip's height.
+/// the step whose swing parts the thighs, on average, at `step_reach` × the
+/// hip pitch's speed cap: in a swing of `period × (1 − double_support)`
+/// the swing foot goes from half a step behind the hip to half a step
+/// ahead, and the stance foot from half a step ahead to half behind, so
+/// the angle between the thighs, about legs of the hip's height, opens by
+/// 2 × step ÷ hip height.
 #[must_use]
 pub fn reachable_step(
     model: &NaoModel,
@@ -867,9 +871,9 @@ mod tests {
         assert_eq!(at(k + 1e-9), at(k + 0.1));
     }
 
-    /// `step_reach` shortens a step whose swing would turn the hip, on
-    /// average, faster than `step_reach` x its speed cap, to exactly that
-    /// step, and leaves shorter steps and every step without it (0) as
+    /// `step_reach` shortens a step whose swing would part the thighs, on
+    /// average, faster than `step_reach` x the hip's speed cap, to exactly
+    /// that step, and leaves shorter steps and every step without it (0) as
     /// asked; the first two steps stay half the (capped) step.
     #[test]
     fn step_reach_caps_the_planned_step_at_the_hips_speed_cap() {
