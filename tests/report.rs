@@ -417,6 +417,10 @@ fn a_nao_report_has_an_animated_replay_of_expert_optim1_and_optim2() {
         // the set walks as planned (no sliding or lunging passed off).
         let planned = column["planned_m"].as_f64().unwrap();
         assert_eq!(t["planned_m"].as_f64(), Some(planned), "{name}");
+        // And its step, the one the walk takes (capped or not).
+        let step = column["planned_step_m"].as_f64();
+        assert!(step.is_some_and(|s| s > 0.0), "{column}");
+        assert_eq!(t["planned_step_m"].as_f64(), step, "{name}");
         let over = column["mx_over_planned"].as_f64().unwrap();
         assert_eq!(over, column["mx"].as_f64().unwrap() / planned, "{name}");
         // The feet's split of mx sums back to it, and the trial's own
@@ -441,6 +445,7 @@ fn a_nao_report_has_an_animated_replay_of_expert_optim1_and_optim2() {
                 "the expert walks as planned: {over}"
             );
             assert!(md.contains("| mx / planned |"), "{md}");
+            assert!(md.contains("| planned step (m) |"), "{md}");
             assert!(md.contains("| mx by sliding (m) |"), "{md}");
             // Where its feet land against the legs' aim, over its touchdowns.
             assert!(md.contains("| landed beyond aim per step (mm) |"), "{md}");

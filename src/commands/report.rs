@@ -31,6 +31,9 @@ struct Row {
     stats: Stats,
     /// How far the set's walk plans to go in a trial, m (NAO runs).
     planned: Option<f64>,
+    /// The full step its walk plans, m (NAO runs): `xlength_step_max`, or
+    /// shorter where `step_reach` caps it.
+    planned_step: Option<f64>,
     /// How the feet covered mx: the mean split of the trials that did not
     /// fall (NAO runs; none if every trial fell).
     footwork: Option<Footwork>,
@@ -426,6 +429,8 @@ fn table_iv(
             let runs = run_trials(exp, &params, trials, threads)?;
             let planned = worker::planned_x_m(&table_request(exp, &params, 0))
                 .map_err(|e| Failure::Job(anyhow!("Table IV plan of {name}: {e}")))?;
+            let planned_step = worker::planned_step_m(&table_request(exp, &params, 0))
+                .map_err(|e| Failure::Job(anyhow!("Table IV step of {name}: {e}")))?;
             let ms: Vec<_> = runs.iter().map(|(m, _)| *m).collect();
             let footwork = Footwork::mean(
                 runs.iter()
@@ -437,6 +442,7 @@ fn table_iv(
                 stats: stats(&ms),
                 params,
                 planned,
+                planned_step,
                 footwork,
             })
         })
@@ -567,6 +573,9 @@ fn table_text(exp: &Experiment, rows: &[Row], trials: u32) -> (String, String) {
     });
     if nao {
         line("planned (m)", &|r| cell(r.planned));
+        line("planned step (m)", &|r| {
+            r.planned_step.map_or("–".into(), |v| format!("{v:.4}"))
+        });
         line("mx / planned", &|r| {
             over_plan(r).map_or("–".into(), |v| format!("{v:.2}"))
         });
@@ -600,6 +609,7 @@ fn table_text(exp: &Experiment, rows: &[Row], trials: u32) -> (String, String) {
                 "ey": r.stats.ey,
                 "mx_over_expert": ratio(r),
                 "planned_m": r.planned,
+                "planned_step_m": r.planned_step,
                 "mx_over_planned": over_plan(r),
                 "footwork": r.footwork,
             })

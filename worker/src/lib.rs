@@ -55,6 +55,21 @@ pub fn planned_x_m(req: &TrialRequest) -> Result<Option<f64>, TrialError> {
     }
 }
 
+/// The full step the request's walk plans, m: `xlength_step_max`, or
+/// shorter where `step_reach` caps it ([`nao::trial::planned_step_m`]);
+/// none for the synthetic model.
+pub fn planned_step_m(req: &TrialRequest) -> Result<Option<f64>, TrialError> {
+    let params = params_of(req)?;
+    match req.model {
+        TrialModel::Synthetic => Ok(None),
+        TrialModel::Nao => {
+            nao::trial::planned_step_m(req.robot_type, &params, nao::trial::Engine::of(req.walk))
+                .map(Some)
+                .map_err(|e| TrialError::Model(e.to_string()))
+        }
+    }
+}
+
 /// Runs one trial: a pure function of the request.
 pub fn run_trial(req: &TrialRequest) -> Result<Measurement, TrialError> {
     run_trial_with_footwork(req).map(|(m, _)| m)
