@@ -921,6 +921,53 @@ mod tests {
         assert!(hip_rate(&g, 0.05) < cap && hip_rate(&g, 0.12) > cap);
     }
 
+    /// The legs' targets, clamped into the stops as the servos get them,
+    /// put the feet one planned step apart at every touchdown, on a
+    /// long-thighed body at the band's pace with the cap and the stance
+    /// hip's roll (the closed loop's constants): forward kinematics of
+    /// [`Gait::leg_targets`] against [`Gait::state`]. (Session 29: that
+    /// body's feet land about 10 % further apart than planned in a trial,
+    /// so the excess is not in the plan or the IK.)
+    #[test]
+    fn the_legs_targets_land_the_feet_one_planned_step_apart() {
+        let mut p = ParamValues::default();
+        for (k, v) in [
+            (Param::ThighRelHip2Z, -0.0794),
+            (Param::RatioFlexion, 0.739),
+            (Param::LongOffset, 0.0064),
+            (Param::HeightLift, 0.0434),
+            (Param::StepLength, 0.1326),
+            (Param::StepPeriod, 0.1352),
+            (Param::DoubleSupport, 0.0),
+            (Param::StepReach, 1.0),
+        ] {
+            p.set(k, v).unwrap();
+        }
+        let model = NaoModel::with_params(0, &p).unwrap();
+        let cfg = crate::nao::balance::GAIT.with_params(&p);
+        let g = Gait::with_config(&model, p.walk(), 10.0, cfg);
+        let leg = Leg::of(&model);
+        let step = g.step_length();
+        assert!(step < 0.1326 - 0.02, "capped: {step}");
+        for k in 4..60 {
+            let t = cfg.start_s + (k as f64 + 0.999) * cfg.period_s;
+            let mut q = g.leg_targets(t);
+            for (side, pre) in ["lle", "rle"].iter().enumerate() {
+                for (i, qi) in q[side].iter_mut().enumerate() {
+                    let j = model.joint_index(&format!("{pre}{}", i + 1)).unwrap();
+                    let (lo, hi) = model.joints[j].limits_rad;
+                    *qi = qi.clamp(lo, hi);
+                }
+            }
+            let l = foot_of(&model, &leg, 0, &q[0]).unwrap().0;
+            let r = foot_of(&model, &leg, 1, &q[1]).unwrap().0;
+            let feet = g.state(t).feet;
+            let planned = feet[0][0] - feet[1][0];
+            assert!((planned.abs() - step).abs() < 1e-3, "{t}: {planned}");
+            assert!(((l[0] - r[0]) - planned).abs() < 1e-3, "{t}: {l:?} {r:?}");
+        }
+    }
+
     /// Arm swing turns each shoulder pitch against its opposite leg, by the
     /// constant times the left foot's lead in step lengths (the right arm
     /// forward, its angle up, as the left foot leads), and touches nothing
