@@ -427,9 +427,10 @@ fn table_iv(
     rows.into_iter()
         .map(|(name, params)| {
             let runs = run_trials(exp, &params, trials, threads)?;
-            let planned = worker::planned_x_m(&table_request(exp, &params, 0))
+            let first = table_request(exp, &params, 0);
+            let planned = worker::planned_x_m(&first)
                 .map_err(|e| Failure::Job(anyhow!("Table IV plan of {name}: {e}")))?;
-            let planned_step = worker::planned_step_m(&table_request(exp, &params, 0))
+            let planned_step = worker::planned_step_m(&first)
                 .map_err(|e| Failure::Job(anyhow!("Table IV step of {name}: {e}")))?;
             let ms: Vec<_> = runs.iter().map(|(m, _)| *m).collect();
             let footwork = Footwork::mean(
