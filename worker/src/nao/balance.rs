@@ -248,6 +248,17 @@ mod tests {
         walks_at_pace_as_planned(&ParamValues::default(), 100, SimSettings::default());
     }
 
+    /// `n` noisy trials of `p` on the closed loop, 10 s each, seeds from 777
+    /// (Table IV's), on 2 threads.
+    fn from_777(p: &ParamValues, n: u64, physics: SimSettings) -> Vec<NaoTrial> {
+        let batch = Batch {
+            seed0: 777,
+            n,
+            threads: 2,
+        };
+        run_many(0, p, batch, 10.0, physics, closed()).unwrap()
+    }
+
     /// `n` trials of `params` from seed 777 with `physics`, held to the pace
     /// issue's walk: s ≥ 0.7, mx ≥ 4.0 m, my/mx ≤ 0.25, and mx within 10 %
     /// of the plan's hip travel. Returns the trials, s, mx and the plan's.
@@ -256,12 +267,7 @@ mod tests {
         n: u64,
         physics: SimSettings,
     ) -> (Vec<NaoTrial>, f64, f64, f64) {
-        let batch = Batch {
-            seed0: 777,
-            n,
-            threads: 2,
-        };
-        let ts = run_many(0, params, batch, 10.0, physics, closed()).unwrap();
+        let ts = from_777(params, n, physics);
         let (s, mx, my) = summary(&ts);
         assert!(s >= 0.7, "s = {s}");
         assert!(mx >= 4.0, "mx = {mx}");
@@ -519,12 +525,7 @@ mod tests {
             pgs_iterations: SimSettings::default().pgs_iterations,
             ..physics
         };
-        let batch = Batch {
-            seed0: 777,
-            n: 30,
-            threads: 2,
-        };
-        let at_12 = run_many(0, &expert, batch, 10.0, loose, closed()).unwrap();
+        let at_12 = from_777(&expert, 30, loose);
         assert!(worst(&at_12) > 1.0, "12 iterations: {:.2}°", worst(&at_12));
         println!(
             "expert: s {s:.2}, mx {mx:.3} m (planned {planned:.3}), {:.2}° (12 iterations: {:.2}°)",
@@ -547,12 +548,7 @@ mod tests {
         walks_at_pace_within_the_stops(&expert, 30, physics);
         let mut still = expert;
         still.set(protocol::params::Param::ArmSwing, 0.0).unwrap();
-        let batch = Batch {
-            seed0: 777,
-            n: 10,
-            threads: 2,
-        };
-        let ts = run_many(0, &still, batch, 10.0, physics, closed()).unwrap();
+        let ts = from_777(&still, 10, physics);
         assert!(ts.iter().all(|t| t.measurement.fell), "a trial stood");
     }
 
@@ -602,12 +598,7 @@ mod tests {
     /// 20 trials of `p` from seed 777 with `physics`: (s, mx, my) and the
     /// plan's travel, m.
     fn twenty_from_777(p: &ParamValues, physics: SimSettings) -> ((f64, f64, f64), f64) {
-        let batch = Batch {
-            seed0: 777,
-            n: 20,
-            threads: 2,
-        };
-        let walked = summary(&run_many(0, p, batch, 10.0, physics, closed()).unwrap());
+        let walked = summary(&from_777(p, 20, physics));
         let planned = trial::planned_travel_m(0, p, 10.0, closed()).unwrap();
         (walked, planned)
     }
@@ -914,13 +905,8 @@ mod tests {
         let (_, physics, expert) =
             shipped(include_str!("../../../experiments/physical-arms-5ms.toml"));
         let long = with_values(expert, &[("ThighRelHip2_Z", -0.0956)]);
-        let batch = Batch {
-            seed0: 777,
-            n: 10,
-            threads: 2,
-        };
         for (p, wide) in [(&long, true), (&expert, false)] {
-            let ts = run_many(0, p, batch, 10.0, physics, closed()).unwrap();
+            let ts = from_777(p, 10, physics);
             let planned = trial::planned_travel_m(0, p, 10.0, closed()).unwrap();
             let (s, mx, _) = summary(&ts);
             let w = crate::nao::footwork::Footwork::mean(
@@ -1008,14 +994,9 @@ mod tests {
             "../../../experiments/physical-technical-arms.toml"
         ));
         assert_eq!(physics.substeps, 2);
-        let batch = Batch {
-            seed0: 777,
-            n: 4,
-            threads: 2,
-        };
         // Over the trials that stand, as `naofarm trial` prints it.
         let footwork = |physics: SimSettings| {
-            let ts = run_many(0, &expert, batch, 10.0, physics, closed()).unwrap();
+            let ts = from_777(&expert, 4, physics);
             let w = crate::nao::footwork::Footwork::mean(
                 ts.iter()
                     .filter(|t| !t.measurement.fell)
@@ -1191,12 +1172,7 @@ mod tests {
                 substeps_max: 0,
                 ..physics
             };
-            let batch = Batch {
-                seed0: 777,
-                n: 20,
-                threads: 2,
-            };
-            let ts = run_many(0, &optim, batch, 10.0, fixed, closed()).unwrap();
+            let ts = from_777(&optim, 20, fixed);
             let (s, mx, my) = summary(&ts);
             let w = crate::nao::footwork::Footwork::mean(
                 ts.iter()
@@ -1263,12 +1239,7 @@ mod tests {
             ("step_period", 0.13837635796158732),
         ];
         let optim = found_in(&exp, &found);
-        let batch = Batch {
-            seed0: 777,
-            n: 100,
-            threads: 2,
-        };
-        let (s, mx, my) = summary(&run_many(0, &optim, batch, 10.0, physics, closed()).unwrap());
+        let (s, mx, my) = summary(&from_777(&optim, 100, physics));
         let planned = trial::planned_travel_m(0, &optim, 10.0, closed()).unwrap();
         println!("s {s}, {mx:.3} m of {planned:.3} m planned");
         assert!(s >= 0.9 && mx >= 6.0 && my / mx <= 0.25, "{s} {mx} {my}");
@@ -1327,12 +1298,7 @@ mod tests {
         // Beyond the plan by stepping: the feet slide less than 2 % of it.
         let sliding = ts.iter().map(|t| t.footwork.sliding_m).sum::<f64>() / ts.len() as f64;
         assert!(sliding.abs() < 0.02 * mx, "{sliding}");
-        let batch = Batch {
-            seed0: 777,
-            n: 100,
-            threads: 2,
-        };
-        let ts = run_many(0, &optim1, batch, 10.0, physics, closed()).unwrap();
+        let ts = from_777(&optim1, 100, physics);
         let (s, mx, my) = summary(&ts);
         let planned = trial::planned_travel_m(0, &optim1, 10.0, closed()).unwrap();
         println!("Optim.1: s {s}, {mx:.3} m of {planned:.3} m planned");

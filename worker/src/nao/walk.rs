@@ -105,8 +105,9 @@ pub struct GaitConfig {
     /// at which the thighs part in a swing, 2 × step ÷ (hip height × swing
     /// time), is at most this many times the hip pitch's speed cap (the
     /// league's 6.14 rad/s; each hip turns about half that rate against
-    /// the torso, and the swing's knee more); 0: no cap, the step `xlength_step_max` asks (every
-    /// engine's own, and every file's before session 29). The registry's
+    /// the torso, and the swing's knee more); 0: no cap, the step
+    /// `xlength_step_max` asks (every engine's own, and every file's before
+    /// session 29). The registry's
     /// `step_reach` sets it: a plan the legs cannot swing is walked short of
     /// itself (docs/walk.md, "A plan the legs can swing").
     pub step_reach: f64,
@@ -947,16 +948,16 @@ mod tests {
         let cfg = crate::nao::balance::GAIT.with_params(&p);
         let g = Gait::with_config(&model, p.walk(), 10.0, cfg);
         let leg = Leg::of(&model);
+        let rest = crate::nao::sim::standing_angles(&model);
         let step = g.step_length();
         assert!(step < 0.1326 - 0.02, "capped: {step}");
         for k in 4..60 {
             let t = cfg.start_s + (k as f64 + 0.999) * cfg.period_s;
-            let mut q = g.leg_targets(t);
-            for (side, pre) in ["lle", "rle"].iter().enumerate() {
-                for (i, qi) in q[side].iter_mut().enumerate() {
-                    let j = model.joint_index(&format!("{pre}{}", i + 1)).unwrap();
-                    let (lo, hi) = model.joints[j].limits_rad;
-                    *qi = qi.clamp(lo, hi);
+            // The targets the servos get, clamped by the gait itself.
+            let mut q = [[0.0; 6]; 2];
+            for (j, target) in g.targets(&rest, t).into_iter().enumerate() {
+                if let Some((side, i)) = g.leg_slots[j] {
+                    q[side][i] = target;
                 }
             }
             let l = foot_of(&model, &leg, 0, &q[0]).unwrap().0;
