@@ -506,6 +506,16 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
     assert!(capped > 0.02 && capped < 0.15, "{capped}");
     let text = String::from_utf8(long("step_reach=1", false)).unwrap();
     assert!(text.contains("capped by step_reach"), "{text}");
+    // The closed loop's touchdowns: the step each took and how far the
+    // foot landed before moved on, in the text and the JSON.
+    assert!(text.contains("at touchdown the feet are"), "{text}");
+    let v: serde_json::Value = serde_json::from_slice(&long("step_aim=0.3", true)).unwrap();
+    for f in ["spacing_m", "settle_m"] {
+        assert!(
+            v["footwork"][f].as_f64().is_some_and(f64::is_finite),
+            "{f}: {v}"
+        );
+    }
     let b = run("5");
     assert_eq!(a["mx"], b["mx"]);
     assert_eq!(a["trials"], b["trials"]);
@@ -514,6 +524,7 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
         "Bogus=1",
         "height_lift=nan",
         "step_reach=-1",
+        "step_aim=2",
     ] {
         let out = naofarm()
             .args(["trial", "--trials", "1", "--param", bad])
@@ -524,14 +535,13 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
     }
     // A feedback gain on the open loop, which has no feedback: refused by
     // name rather than ignored.
-    let err = fails(
-        naofarm().args(["trial", "--trials", "1", "--param", "hip_pitch_gain=-1"]),
-        2,
-    );
-    assert!(
-        err.contains("hip_pitch_gain") && err.contains("open-loop"),
-        "{err}"
-    );
+    for gain in ["hip_pitch_gain", "step_aim"] {
+        let err = fails(
+            naofarm().args(["trial", "--trials", "1", "--param", &format!("{gain}=0.3")]),
+            2,
+        );
+        assert!(err.contains(gain) && err.contains("open-loop"), "{err}");
+    }
     let out = naofarm()
         .args(["trial", "--trials", "1", "--pgs-iterations", "500"])
         .output()

@@ -449,6 +449,26 @@ fn a_nao_report_has_an_animated_replay_of_expert_optim1_and_optim2() {
             assert!(md.contains("| mx by sliding (m) |"), "{md}");
             // Where its feet land against the legs' aim, over its touchdowns.
             assert!(md.contains("| landed beyond aim per step (mm) |"), "{md}");
+            // The step each touchdown takes in the world, and how far the
+            // foot that landed before has moved on by then.
+            let row = md
+                .lines()
+                .find(|l| l.starts_with("| step at touchdown (m) / moved on after (mm) |"))
+                .unwrap_or_else(|| panic!("{md}"));
+            let (spacing, settle) = (
+                w["spacing_m"].as_f64().unwrap(),
+                w["settle_m"].as_f64().unwrap(),
+            );
+            assert!(
+                row.contains(&format!("| {spacing:.4} / {:+.1} |", settle * 1000.0)),
+                "{row}"
+            );
+            // The expert's steps are about its plan's 0.08 m, and a planted
+            // foot stays within a centimetre of where it landed.
+            assert!(
+                (0.06..0.10).contains(&spacing) && settle.abs() < 0.01,
+                "{w}"
+            );
             // How it carries its torso: the cell is the column's mean pitch.
             let pitch = w["torso_pitch_deg"].as_f64().unwrap();
             assert!(pitch.abs() < 45.0, "{w}");

@@ -117,14 +117,17 @@ pub enum WalkEngine {
     ClosedLoop,
 }
 
-/// A feedback gain (`hip_pitch_gain`, `ankle_pitch_gain`, `turn_place`) needs a walk with
+/// A feedback gain (`hip_pitch_gain`, `ankle_pitch_gain`, `turn_place`, `step_aim`) needs a walk with
 /// feedback: the open loop has none to give it to, so a parameter set for it
 /// that names one is refused (by an experiment file and by `naofarm trial`).
 pub fn gain_has_feedback(walk: WalkEngine, name: &str) -> Result<(), String> {
     let gain = params::find(name).is_some_and(|k| {
         matches!(
             k.param,
-            params::Param::HipPitchGain | params::Param::AnklePitchGain | params::Param::TurnPlace
+            params::Param::HipPitchGain
+                | params::Param::AnklePitchGain
+                | params::Param::TurnPlace
+                | params::Param::StepAim
         )
     });
     if gain && walk == WalkEngine::OpenLoop {
@@ -824,7 +827,9 @@ expert = -0.04
             "physical-technical-converged-period-1ms.toml",
             "physical-technical-converged-period-band.toml",
             "physical-converged-band.toml",
+            "physical-converged-band-aim.toml",
             "physical-technical-converged-period-band-reach.toml",
+            "physical-technical-converged-period-band-reach-aim.toml",
             "physical-stiff.toml",
             "physical-firm.toml",
             "physical-technical-stiff.toml",
@@ -847,13 +852,18 @@ expert = -0.04
                 "physical-technical-converged-period-1ms.toml" => (20, 0),
                 "physical-technical-converged-period-band.toml"
                 | "physical-converged-band.toml"
-                | "physical-technical-converged-period-band-reach.toml" => (16, 30),
+                | "physical-converged-band-aim.toml"
+                | "physical-technical-converged-period-band-reach.toml"
+                | "physical-technical-converged-period-band-reach-aim.toml" => (16, 30),
                 _ => (e.physics.substeps, 0),
             };
             assert_eq!((e.physics.substeps, e.physics.substeps_max), band, "{f}");
-            // Only the reach file caps the plan's steps.
-            let reach = f.ends_with("band-reach.toml").then_some(&1.0);
+            // Only the reach files cap the plan's steps, and only the aim
+            // files aim them short by the legs' overreach.
+            let reach = f.contains("band-reach").then_some(&1.0);
             assert_eq!(e.fixed.get("step_reach"), reach, "{f}");
+            let aim = f.ends_with("-aim.toml").then_some(&0.3);
+            assert_eq!(e.fixed.get("step_aim"), aim, "{f}");
             if f.contains("band") {
                 assert!(e
                     .physics

@@ -58,6 +58,8 @@ pub enum Param {
     TurnPlace,
     /// `step_reach`.
     StepReach,
+    /// `step_aim`.
+    StepAim,
 }
 
 impl Param {
@@ -284,6 +286,17 @@ pub const KNOWN: &[KnownParam] = &[
         unit: "1",
         default: 0.0,
         doc: "the planned step shortened until the thighs part in a swing, on average (2 x step / (hip height x swing time)), at most this many times the hip pitch's speed cap; not given, every engine's own (0: the step xlength_step_max asks)",
+    },
+    // Where the legs land against where they were aimed.
+    KnownParam {
+        param: Param::StepAim,
+        name: "step_aim",
+        role: Role::Walk,
+        min: 0.0,
+        max: 1.0,
+        unit: "1",
+        default: 0.0,
+        doc: "each step's share in the closed loop's estimate of how far the legs land past their aim (sensed feet spacing over aimed, at each step's end); the plan is aimed short by it so the feet land its steps; not given, the closed-loop engine's own (0: aimed as planned)",
     },
 ];
 

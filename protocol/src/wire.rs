@@ -25,8 +25,9 @@ use crate::{
 /// 8 since `hip_roll_comp` and `arm_swing` joined the registry; 9 since a
 /// trial request's physics carries `firm_stop_window_deg`; 10 since
 /// `turn_place` joined the registry; 11 since a trial request's physics
-/// carries `substeps_max`; 12 since `step_reach` joined the registry.
-pub const WIRE_VERSION: u8 = 12;
+/// carries `substeps_max`; 12 since `step_reach` joined the registry; 13
+/// since `step_aim` joined it.
+pub const WIRE_VERSION: u8 = 13;
 /// Largest message accepted, in bytes (checked before any allocation).
 pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
 const MAGIC: [u8; 2] = *b"NF";

@@ -476,6 +476,17 @@ fn torso_pitch(r: &Row) -> String {
 }
 
 /// How far a set's feet land beyond the legs' aim per step, mm, as a cell.
+/// The step at touchdown in the world, and how far the foot landed before
+/// has moved on by then: a foot that skids on after it lands carries the
+/// torso beyond its steps.
+fn step_at_touchdown(r: &Row) -> String {
+    r.footwork
+        .filter(|w| w.touchdowns > 0)
+        .map_or("–".into(), |w| {
+            format!("{:.4} / {:+.1}", w.spacing_m, w.settle_m * 1000.0)
+        })
+}
+
 fn landed_beyond_aim(r: &Row) -> String {
     r.footwork
         .filter(|w| w.touchdowns > 0)
@@ -588,6 +599,10 @@ fn table_text(exp: &Experiment, rows: &[Row], trials: u32) -> (String, String) {
         });
         line("mx by lean (m)", &|r| cell(r.footwork.map(|w| w.lean_m)));
         line("landed beyond aim per step (mm)", &landed_beyond_aim);
+        line(
+            "step at touchdown (m) / moved on after (mm)",
+            &step_at_touchdown,
+        );
         line("torso pitch (°, − leans back)", &torso_pitch);
     }
     let json: Vec<serde_json::Value> = rows
@@ -791,6 +806,10 @@ fn index_html(
             })
         });
         line("landed beyond aim per step (mm)", &landed_beyond_aim);
+        line(
+            "step at touchdown (m) / moved on after (mm)",
+            &step_at_touchdown,
+        );
         line("torso pitch (°, − leans back)", &torso_pitch);
     }
     h += "</table>\n";

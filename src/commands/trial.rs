@@ -230,6 +230,12 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
                     w.overreach_m * 1000.0,
                     w.touchdowns
                 );
+                outln!(
+                    "at touchdown the feet are {:.4} m apart (the plan's step: {step:.4} m); \
+                     the foot that landed before has moved on {:+.1} mm",
+                    w.spacing_m,
+                    w.settle_m * 1000.0
+                );
             }
             outln!(
                 "the torso's mean pitch: {:+.1}° (negative: leaning back)",

@@ -17,7 +17,10 @@
 //! spread wider (or narrower) than their targets put them. At each
 //! touchdown the tracker compares the feet's distance along the torso's x
 //! axis from the forward kinematics of the true joint angles with that of
-//! the angles the servos were steered to (`overreach_m`).
+//! the angles the servos were steered to (`overreach_m`). In the world it
+//! records the step each touchdown takes (`spacing_m`) and how far the
+//! foot that landed before has moved on since (`settle_m`): a foot that
+//! skids on after it lands carries the torso further than its step.
 //!
 //! How the torso is carried shows in `torso_pitch_deg`, its mean pitch over
 //! the cycles read: a fast walk that leans far back stands on its heels, and
@@ -60,6 +63,15 @@ pub struct Footwork {
     /// The torso's mean forward pitch over the cycles read (its x axis
     /// below the horizon), degrees; negative: leaning back.
     pub torso_pitch_deg: f64,
+    /// Mean over touchdowns: how far the landing foot's centre is ahead of
+    /// the other's along the world's x axis as it lands, m (the step it
+    /// took, to compare with the plan's).
+    pub spacing_m: f64,
+    /// Mean over touchdowns after the first: how far the other foot has moved
+    /// forward since its own touchdown, m. A foot that lands and stays put
+    /// moves 0; what a landed foot skids on before it holds shows here, and
+    /// the torso is carried on by it.
+    pub settle_m: f64,
 }
 
 impl Footwork {
@@ -70,6 +82,7 @@ impl Footwork {
         let mut plants = 0u64;
         let mut touchdowns = 0u64;
         let mut reach = 0.0;
+        let (mut spacing, mut settle) = (0.0, 0.0);
         let mut pitch = 0.0;
         let mut n = 0u32;
         for w in trials {
@@ -79,24 +92,31 @@ impl Footwork {
             plants += u64::from(w.plants);
             // Weighted by touchdowns: the mean over every touchdown.
             reach += w.overreach_m * f64::from(w.touchdowns);
+            spacing += w.spacing_m * f64::from(w.touchdowns);
+            settle += w.settle_m * f64::from(w.touchdowns);
             touchdowns += u64::from(w.touchdowns);
             pitch += w.torso_pitch_deg;
             n += 1;
         }
         (n > 0).then(|| {
             let k = f64::from(n);
+            let per_touchdown = |sum: f64| {
+                if touchdowns > 0 {
+                    sum / touchdowns as f64
+                } else {
+                    0.0
+                }
+            };
             Footwork {
                 stepping_m: sum.stepping_m / k,
                 sliding_m: sum.sliding_m / k,
                 lean_m: sum.lean_m / k,
                 plants: u32::try_from(plants / u64::from(n)).unwrap_or(u32::MAX),
-                overreach_m: if touchdowns > 0 {
-                    reach / touchdowns as f64
-                } else {
-                    0.0
-                },
+                overreach_m: per_touchdown(reach),
                 touchdowns: u32::try_from(touchdowns / u64::from(n)).unwrap_or(u32::MAX),
                 torso_pitch_deg: pitch / k,
+                spacing_m: per_touchdown(spacing),
+                settle_m: per_touchdown(settle),
             }
         })
     }
@@ -113,6 +133,10 @@ pub struct Tracker {
     /// Cycles each foot has been in the air.
     air: [u32; 2],
     reach_sum: f64,
+    spacing_sum: f64,
+    settle_sum: f64,
+    /// Where each foot's centre was along x at its last touchdown, m.
+    landed_at: [Option<f64>; 2],
     pitch_sum: f64,
     cycles: u32,
 }
@@ -131,6 +155,9 @@ impl Tracker {
             offset,
             air: [0, 0],
             reach_sum: 0.0,
+            spacing_sum: 0.0,
+            settle_sum: 0.0,
+            landed_at: [None, None],
             pitch_sum: 0.0,
             cycles: 0,
         }
@@ -139,7 +166,8 @@ impl Tracker {
     /// Adds one cycle, read after it; `targets` are the joint angles the
     /// servos were steered to in it (model order).
     pub fn fold(&mut self, sim: &Sim, p: &Perception, targets: &[f64]) {
-        for (side, centre) in sim.feet_centres().iter().enumerate() {
+        let centres = sim.feet_centres();
+        for (side, centre) in centres.iter().enumerate() {
             let now = planted(p, side);
             let was = self.planted[side];
             let dx = centre[0] - self.feet[side][0];
@@ -155,7 +183,13 @@ impl Tracker {
                     let landed = ahead(model, feet, side, &p.joint_angles_rad);
                     let aimed = ahead(model, feet, side, targets);
                     if (landed - aimed).is_finite() {
+                        let other = centres[1 - side][0];
                         self.reach_sum += landed - aimed;
+                        self.spacing_sum += centre[0] - other;
+                        // The first touchdown has no earlier one to settle
+                        // from: the foot stood there, which is 0.
+                        self.settle_sum += self.landed_at[1 - side].map_or(0.0, |x| other - x);
+                        self.landed_at[side] = Some(centre[0]);
                         self.work.touchdowns += 1;
                     }
                 }
@@ -176,13 +210,18 @@ impl Tracker {
     /// The split so far.
     #[must_use]
     pub fn footwork(&self) -> Footwork {
-        Footwork {
-            lean_m: self.offset - self.offset0,
-            overreach_m: if self.work.touchdowns > 0 {
-                self.reach_sum / f64::from(self.work.touchdowns)
+        let per_touchdown = |sum: f64| {
+            if self.work.touchdowns > 0 {
+                sum / f64::from(self.work.touchdowns)
             } else {
                 0.0
-            },
+            }
+        };
+        Footwork {
+            lean_m: self.offset - self.offset0,
+            overreach_m: per_touchdown(self.reach_sum),
+            spacing_m: per_touchdown(self.spacing_sum),
+            settle_m: per_touchdown(self.settle_sum),
             torso_pitch_deg: if self.cycles > 0 {
                 self.pitch_sum / f64::from(self.cycles)
             } else {
@@ -203,7 +242,8 @@ pub fn forward_pitch_deg([x, y, z, w]: [f64; 4]) -> f64 {
 
 /// How far foot `side`'s centre is ahead of the other's along the torso's
 /// x axis with joint angles `q` (forward kinematics from the torso), m.
-fn ahead(model: &NaoModel, feet: [usize; 2], side: usize, q: &[f64]) -> f64 {
+#[must_use]
+pub fn ahead(model: &NaoModel, feet: [usize; 2], side: usize, q: &[f64]) -> f64 {
     if q.len() != model.joints.len() {
         return f64::NAN;
     }

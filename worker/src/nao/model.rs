@@ -195,7 +195,8 @@ impl Morphology {
             | Param::HipRollComp
             | Param::ArmSwing
             | Param::TurnPlace
-            | Param::StepReach => None,
+            | Param::StepReach
+            | Param::StepAim => None,
         }
     }
 

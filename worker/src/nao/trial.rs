@@ -15,11 +15,11 @@ use protocol::measurement::Measurement;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::balance::{Balance, Gains};
-use super::footwork::{Footwork, Tracker};
+use super::balance::{Balance, Gains, StepGauge};
+use super::footwork::{ahead, Footwork, Tracker};
 use super::model::{ModelError, NaoModel};
 use super::sim::{fallen, standing_angles, Perception, Sim, SimError, SimSettings, Start, CYCLE_S};
-use super::walk::{Gait, GaitConfig, WalkParams};
+use super::walk::{Gait, GaitConfig, Paced, WalkParams};
 use crate::noise::gauss;
 use protocol::params::ParamValues;
 pub use protocol::WalkEngine;
@@ -367,26 +367,57 @@ pub fn run_observed(
     let mut overruns = Overruns::new(&model);
     let mut capped = Capped::new(&sim);
     let mut footwork = Tracker::new(&sim, &perception);
+    // With `step_aim`, the plan walked at the pace its sensed steps call for.
+    let mut paced = balance
+        .as_ref()
+        .and_then(|b| b.gauge())
+        .map(|gauge| Pacing {
+            gauge,
+            plan: Paced::new(),
+            last_aim: None,
+        });
     let mut run = 0;
     for k in 0..cycles {
         let t = k as f64 * CYCLE_S;
-        let q_next = gait.targets(&rest, t + CYCLE_S);
+        // Where the swing foot of the step now under way is aimed to land,
+        // and that of the step before, as aimed at its last cycle.
+        let mut aim_now = None;
+        let next = match paced.as_mut() {
+            None => gait.state(t + CYCLE_S),
+            Some(pacing) => {
+                let pace = pacing.gauge.pace();
+                if let Some(step) = gait.step_at(t) {
+                    let planned = gait.foothold(step + 1) - gait.foothold(step);
+                    aim_now = Some((step, pace * planned));
+                    if gait.step_at(t + CYCLE_S) != Some(step) {
+                        pacing.last_aim = aim_now;
+                    }
+                }
+                pacing.plan.state(&gait, t + CYCLE_S, pace)
+            }
+        };
+        let q_next = gait.targets_of(&rest, &next, 0.0);
+        let mut landing = None;
         let aim = match balance.as_mut() {
             None => None,
             Some(b) => {
                 let sensed = noisy(&perception, &mut rng);
                 let c = b.update(&sensed, CYCLE_S);
+                if let Some(pacing) = paced.as_mut() {
+                    landing = pacing.gauge.touchdown(&sensed);
+                }
                 // The plan's targets, or with the feet placed against the turn.
                 let turned;
                 let planned = if c.turn == 0.0 {
                     &q_next
                 } else {
-                    turned = gait.targets_turned(&rest, t + CYCLE_S, c.turn);
+                    turned = gait.targets_of(&rest, &next, c.turn);
                     &turned
                 };
                 Some(gait.corrected(planned, &c))
             }
         };
+        let mut sensed_q = Vec::new();
         let cmd: Vec<f64> = perception
             .joint_angles_rad
             .iter()
@@ -395,12 +426,25 @@ pub fn run_observed(
             .enumerate()
             .map(|(j, ((m, a), b))| {
                 let measured = m + sensor * gauss(&mut rng);
+                if landing.is_some() {
+                    sensed_q.push(measured);
+                }
                 let target = aim.as_ref().map_or(*b, |q| q[j]);
                 (b - a) / CYCLE_S
                     + super::sim::SERVO_GAIN * (target - measured)
                     + ACTUATOR_NOISE_RAD_S * gauss(&mut rng)
             })
             .collect();
+        if let (Some(side), Some(pacing)) = (landing, paced.as_mut()) {
+            // The landing foot's step: the one under way, or (landing just
+            // after its end) the one before. The first two, half steps from
+            // standing, are not read.
+            let swung = |a: &Option<(usize, f64)>| a.filter(|(k, _)| *k >= 2 && 1 - k % 2 == side);
+            if let Some((_, aimed)) = swung(&aim_now).or(swung(&pacing.last_aim)) {
+                let landed = ahead(&model, sim.foot_bodies(), side, &sensed_q);
+                pacing.gauge.fold(landed, aimed);
+            }
+        }
         capped.fold(&cmd);
         run = k + 1;
         perception = match sim.step(&cmd) {
@@ -453,6 +497,15 @@ pub fn run_observed(
         footwork: footwork.footwork(),
         substeps: settings.substeps,
     })
+}
+
+/// The closed loop's `step_aim` in a trial: the plan at its pace, and the
+/// gauge that sets the pace from the landings.
+struct Pacing {
+    gauge: StepGauge,
+    plan: Paced,
+    /// The last finished step and where its swing foot was aimed to land, m.
+    last_aim: Option<(usize, f64)>,
 }
 
 /// The sensors of `p` as the closed-loop walk reads them: gyro, accelerometer

@@ -603,8 +603,14 @@ impl Gait {
     /// `turn` (rad, about the vertical; [`Gait::legs_at`]).
     #[must_use]
     pub fn targets_turned(&self, rest: &[f64], t: f64, turn: f64) -> Vec<f64> {
-        let st = self.state(t);
-        let legs = self.legs_at(&st, turn);
+        self.targets_of(rest, &self.state(t), turn)
+    }
+
+    /// [`Gait::targets_turned`] for a state `st` of this gait (the plan's
+    /// own at some time, or one [`Paced`] from it).
+    #[must_use]
+    pub fn targets_of(&self, rest: &[f64], st: &GaitState, turn: f64) -> Vec<f64> {
+        let legs = self.legs_at(st, turn);
         let mut q = rest.to_vec();
         if self.cfg.arm_swing_rad != 0.0 {
             // How far the left foot leads the right, in step lengths.
@@ -624,6 +630,91 @@ impl Gait {
             *qj = qj.clamp(*lo, *hi);
         }
         q
+    }
+
+    /// The step the plan is in at time t (0 the first), none before stepping
+    /// starts. In step k the support foot is side `k % 2` (0 left) and the
+    /// other foot swings; it lands at the step's end.
+    #[must_use]
+    pub fn step_at(&self, t: f64) -> Option<usize> {
+        (t >= self.cfg.start_s)
+            .then(|| ((t - self.cfg.start_s) / self.cfg.period_s).floor() as usize)
+    }
+
+    /// Where the plan puts the k-th foothold forward, m: the support foot of
+    /// step k stands on foothold k, its swing foot lands on foothold k + 1.
+    #[must_use]
+    pub fn foothold(&self, k: usize) -> f64 {
+        self.steps[k.min(self.steps.len() - 1)]
+    }
+}
+
+/// A gait's plan walked at a pace of its own: each step the plan takes is
+/// taken `pace` times as long, the hip's advance over its support foot with
+/// it, so at a constant pace the walk is the plan with every step `pace`
+/// times as long. A pace that changes moves a target by at most the change
+/// times a step (the swing foot by its share of the way, the hip by its
+/// lead), and the feet stay one paced step apart: no foot keeps a lead an
+/// earlier pace left.
+/// Sideways and vertical motion stay the plan's. The closed loop's
+/// `step_aim` uses it to aim its steps short by what its legs overreach
+/// (`nao::balance`).
+#[derive(Debug, Clone)]
+pub struct Paced {
+    /// The step the footholds are held for.
+    step: usize,
+    /// Where the step's swing foot lifted off and its support foot stands, m.
+    held: [f64; 2],
+    /// The pace of the last call.
+    pace: f64,
+}
+
+impl Default for Paced {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Paced {
+    /// The plan before its first step, at pace 1.
+    #[must_use]
+    pub fn new() -> Self {
+        Self {
+            step: 0,
+            held: [0.0, 0.0],
+            pace: 1.0,
+        }
+    }
+
+    /// The gait's state at time `t` (not before the last call's) walked at
+    /// `pace`.
+    pub fn state(&mut self, gait: &Gait, t: f64, pace: f64) -> GaitState {
+        let mut st = gait.state(t);
+        let Some(k) = gait.step_at(t) else {
+            return st;
+        };
+        // Each finished step's foot landed where its last pace aimed it.
+        while self.step < k {
+            let j = self.step;
+            let landed = self.held[1] + self.pace * (gait.foothold(j + 1) - gait.foothold(j));
+            self.held = [self.held[1], landed];
+            self.step = j + 1;
+        }
+        self.pace = pace;
+        let (sup, sw) = (k % 2, 1 - k % 2);
+        let (from, to) = (gait.foothold(k.saturating_sub(1)), gait.foothold(k + 1));
+        let (lifted, stands) = (self.held[0], self.held[1]);
+        let lands = stands + pace * (to - gait.foothold(k));
+        let share = if to > from {
+            (st.feet[sw][0] - from) / (to - from)
+        } else {
+            0.0
+        };
+        st.feet[sup][0] = stands;
+        st.feet[sw][0] = lifted + (lands - lifted) * share;
+        let offset = gait.p.long_offset;
+        st.hip[0] = stands + offset + pace * (st.hip[0] - offset - gait.foothold(k));
+        st
     }
 }
 
@@ -920,6 +1011,99 @@ mod tests {
         // covers both branches.
         let g = Gait::with_config(&model, WalkParams::EXPERT, 3.0, capped);
         assert!(hip_rate(&g, 0.05) < cap && hip_rate(&g, 0.12) > cap);
+    }
+
+    /// A plan walked at pace 1 is the plan; at a pace p each step lands p
+    /// times the plan's step ahead of the support foot and the hip keeps p
+    /// times the plan's lead over it; each cycle the targets move by the
+    /// plan's motion at the pace, and by at most the pace's change times a
+    /// step besides; the feet stay one paced step apart.
+    #[test]
+    fn a_paced_plan_takes_each_step_at_its_pace() {
+        let model = NaoModel::new(Morphology::of_type(0).unwrap()).unwrap();
+        let cfg = crate::nao::balance::GAIT;
+        let g = Gait::with_config(&model, WalkParams::EXPERT, 6.0, cfg);
+        let cycle = 0.02;
+        // Off the step boundaries (0.5 s + k x 0.18 s), which fall on cycles.
+        let times = || (0..300).map(|i| f64::from(i) * cycle + 0.005);
+        let mut at_one = Paced::new();
+        for t in times() {
+            let (plan, paced) = (g.state(t), at_one.state(&g, t, 1.0));
+            for (a, b) in [plan.hip, plan.feet[0], plan.feet[1]].iter().zip([
+                paced.hip,
+                paced.feet[0],
+                paced.feet[1],
+            ]) {
+                for (x, y) in a.iter().zip(b) {
+                    assert!((x - y).abs() < 1e-12, "{t}: {a:?} {b:?}");
+                }
+            }
+        }
+        // The pace drops from 1 to 0.8 at 2 s, then rises to 0.9 at 4 s.
+        let pace_at = |t: f64| {
+            if t < 2.0 {
+                1.0
+            } else if t < 4.0 {
+                0.8
+            } else {
+                0.9
+            }
+        };
+        let mut paced = Paced::new();
+        let (mut was, mut plan_was) = (paced.state(&g, 0.005, 1.0), g.state(0.005));
+        let mut checked = 0;
+        for t in times().skip(1) {
+            let (st, plan) = (paced.state(&g, t, pace_at(t)), g.state(t));
+            let moved = |a: &GaitState, b: &GaitState| {
+                [
+                    a.hip[0] - b.hip[0],
+                    a.feet[0][0] - b.feet[0][0],
+                    a.feet[1][0] - b.feet[1][0],
+                ]
+            };
+            let (ours, theirs) = (moved(&st, &was), moved(&plan, &plan_was));
+            // The pace's change over the last two steps (a swing foot lifted
+            // from where an earlier pace put it).
+            let change = (0..=25)
+                .map(|i| (pace_at(t) - pace_at(t - f64::from(i) * cycle)).abs())
+                .fold(0.0, f64::max);
+            for (o, p) in ours.iter().zip(theirs) {
+                // The plan's motion at the pace, and a pace change moves a
+                // target by at most the change times a step.
+                let bound = change * g.p.step_length + 1e-9;
+                assert!(
+                    (o - pace_at(t) * p).abs() <= bound,
+                    "{t}: {ours:?} against {theirs:?}"
+                );
+            }
+            // At a step's last cycle: the swing foot is where the pace lands
+            // it, and the hip's lead over the support foot is the pace's.
+            if let (Some(k), Some(next)) = (g.step_at(t), g.step_at(t + cycle)) {
+                if next != k && k >= 2 {
+                    let (sup, sw) = (k % 2, 1 - k % 2);
+                    let step = g.foothold(k + 1) - g.foothold(k);
+                    let end = t + cycle - 1e-9;
+                    let mut ahead = paced.clone();
+                    let st_end = ahead.state(&g, end, pace_at(t));
+                    let spacing = st_end.feet[sw][0] - st_end.feet[sup][0];
+                    assert!((spacing - pace_at(t) * step).abs() < 1e-6, "{t}: {spacing}");
+                    let lead = st.hip[0] - st.feet[sup][0] - g.p.long_offset;
+                    let plan_lead = plan.hip[0] - plan.feet[sup][0] - g.p.long_offset;
+                    assert!((lead - pace_at(t) * plan_lead).abs() < 1e-9, "{t}: {lead}");
+                    checked += 1;
+                }
+            }
+            (was, plan_was) = (st, plan);
+        }
+        assert_eq!(checked, 28, "steps 2 to 29 end within the 6 s");
+        // Walked at 0.8 and 0.9 for most of it, the feet ended well short of
+        // the plan's.
+        assert!(
+            was.hip[0] < 0.92 * plan_was.hip[0],
+            "{} {}",
+            was.hip[0],
+            plan_was.hip[0]
+        );
     }
 
     /// The legs' targets, clamped into the stops as the servos get them,
