@@ -114,6 +114,27 @@ fn report_writes_every_figure_and_table_iv_and_leaves_the_run_as_it_was() {
     assert_eq!(pairs, 10, "each pair of five parameters");
     assert_eq!(circles(&out.join("progress.svg")), 24);
     circles(&out.join("decisions.svg"));
+    // One bar, with its edge, per decision taken in the (one) block of
+    // 50 iterations; a decision not taken draws none, and no bar is empty.
+    let taken = ["REJECT", "EQUIVALENT", "ACCEPT"]
+        .iter()
+        .filter(|d| rows.iter().any(|r| r["decision"] == **d))
+        .count();
+    let text = std::fs::read_to_string(out.join("decisions.svg")).unwrap();
+    let doc = roxmltree::Document::parse(&text).unwrap();
+    let edges: Vec<_> = doc
+        .descendants()
+        .filter(|n| {
+            n.tag_name().name() == "rect"
+                && n.attribute("fill") == Some("none")
+                && n.attribute("stroke") == Some("#000000")
+        })
+        .collect();
+    assert_eq!(edges.len(), taken, "one edged bar per decision taken");
+    for r in &edges {
+        let h: f64 = r.attribute("height").unwrap().parse().unwrap();
+        assert!(h > 0.0, "an empty bar: {r:?}");
+    }
     // Every figure also as a PNG of the SVG's size, not blank.
     let mut pngs = 0;
     for e in std::fs::read_dir(&out).unwrap() {

@@ -311,7 +311,12 @@ fn decisions_figure(decided: &[DecidedIteration]) -> anyhow::Result<String> {
             let x0 = (k * 50) as f64 + 4.0;
             let x1 = x0 + 42.0;
             let mut y = 0.0;
+            // A decision not taken in a block draws no bar (a bar of no
+            // height is invalid SVG to a renderer).
             for (n, fill) in c.iter().zip([BLACK, GREY, WHITE]) {
+                if *n == 0 {
+                    continue;
+                }
                 let top = y + f64::from(*n);
                 let edge = Rectangle::new([(x0, y), (x1, top)], BLACK.stroke_width(1));
                 chart
@@ -1026,4 +1031,78 @@ fn to_png(svg: &str, opt: &resvg::usvg::Options<'_>) -> anyhow::Result<Vec<u8>> 
         &mut pixmap.as_mut(),
     );
     Ok(pixmap.encode_png()?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn decided(iteration: u64, decision: Decision) -> DecidedIteration {
+        DecidedIteration {
+            iteration,
+            params: vec![-0.04],
+            stats: Stats {
+                trials: 10,
+                successes: 10,
+                s: 1.0,
+                mx: Some(4.0),
+                my: Some(0.1),
+                ex: Some(0.2),
+                ey: Some(0.1),
+                mx_all: 4.0,
+                my_all: 0.1,
+            },
+            decision,
+            best: None,
+        }
+    }
+
+    /// The edged bars of a decisions figure: (x, height) of each.
+    fn bars(svg: &str) -> Vec<(f64, f64)> {
+        let doc = roxmltree::Document::parse(svg).expect("the figure parses");
+        doc.descendants()
+            .filter(|n| {
+                n.tag_name().name() == "rect"
+                    && n.attribute("fill") == Some("none")
+                    && n.attribute("stroke") == Some("#000000")
+            })
+            .map(|n| {
+                let a = |k| n.attribute(k).and_then(|v| v.parse().ok()).unwrap_or(-1.0);
+                (a("x"), a("height"))
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_decision_not_taken_in_a_block_draws_no_bar() {
+        // Block one: 30 REJECT and 20 EQUIVALENT, no ACCEPT; block two: 10
+        // ACCEPT alone.
+        let mut d: Vec<_> = (0..50)
+            .map(|i| {
+                decided(
+                    i,
+                    if i < 30 {
+                        Decision::Reject
+                    } else {
+                        Decision::Equivalent
+                    },
+                )
+            })
+            .collect();
+        d.extend((50..60).map(|i| decided(i, Decision::Accept)));
+        let svg = decisions_figure(&d).expect("the figure draws");
+        let b = bars(&svg);
+        assert_eq!(b.len(), 3, "{b:?}");
+        assert!(b.iter().all(|&(_, h)| h > 0.0), "an empty bar: {b:?}");
+        // Heights in proportion to the counts: 30, 20 and 10.
+        let (h30, h20, h10) = (b[0].1, b[1].1, b[2].1);
+        assert!(
+            (h30 / h10 - 3.0).abs() < 0.1 && (h20 / h10 - 2.0).abs() < 0.1,
+            "{b:?}"
+        );
+        assert!(b[2].0 > b[0].0, "the ACCEPT bar is in the second block");
+        // And it renders as a PNG.
+        let png = to_png(&svg, &png_fonts()).expect("renders");
+        assert!(png.len() > 1000);
+    }
 }
