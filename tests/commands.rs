@@ -845,7 +845,14 @@ fn bench_sim_reports_its_shares_over_rounds() {
         succeed(naofarm().args(["bench", "sim", "--json", "--seconds", "1", "--rounds", "3"]));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["rounds"], 3, "{v}");
-    for key in ["closed_loop", "arms_5ms", "arms", "firm", "band"] {
+    for key in [
+        "closed_loop",
+        "arms_5ms",
+        "arms",
+        "firm",
+        "band",
+        "band_reach_aim",
+    ] {
         let (share, spread) = if key == "closed_loop" {
             (
                 &v["closed_loop_share_of_open_loop"],
@@ -884,24 +891,27 @@ fn bench_sim_reports_its_shares_over_rounds() {
     assert_eq!(v["shares_by"], "the measuring thread's CPU clock", "{v}");
     // The band file's row walks once at each of its 15 steps: 1 s each, so
     // 15 s of simulation and 16 + 17 + ... + 30 = 345 steps per 20 ms cycle.
-    let band = rows
-        .iter()
-        .find(|r| r["settings"].as_str().unwrap().starts_with("band file"))
-        .unwrap();
-    assert_eq!(
-        (band["substeps"].as_u64(), band["substeps_max"].as_u64()),
-        (Some(16), Some(30)),
-        "{band}"
-    );
-    let (rtf, sps) = (
-        band["realtime_factor"].as_f64().unwrap(),
-        band["steps_per_second"].as_f64().unwrap(),
-    );
-    let steps_per_sim_s = sps / rtf;
-    assert!(
-        (steps_per_sim_s - 345.0 / 15.0 / 0.02).abs() < 1.0,
-        "{steps_per_sim_s} steps per simulated second: {band}"
-    );
+    // So does the reach-aim file's, on the same band.
+    for file in ["band file", "reach-aim file"] {
+        let band = rows
+            .iter()
+            .find(|r| r["settings"].as_str().unwrap().starts_with(file))
+            .unwrap();
+        assert_eq!(
+            (band["substeps"].as_u64(), band["substeps_max"].as_u64()),
+            (Some(16), Some(30)),
+            "{band}"
+        );
+        let (rtf, sps) = (
+            band["realtime_factor"].as_f64().unwrap(),
+            band["steps_per_second"].as_f64().unwrap(),
+        );
+        let steps_per_sim_s = sps / rtf;
+        assert!(
+            (steps_per_sim_s - 345.0 / 15.0 / 0.02).abs() < 1.0,
+            "{steps_per_sim_s} steps per simulated second: {band}"
+        );
+    }
     for bad in ["0", "101", "x"] {
         let out = naofarm()
             .args(["bench", "sim", "--seconds", "1", "--rounds", bad])

@@ -430,7 +430,7 @@ impl FileWalk {
 }
 
 /// The files `bench sim` measures, the converged first.
-const FILES: [FileWalk; 6] = [
+const FILES: [FileWalk; 7] = [
     // Converged physics with its fixed values.
     FileWalk {
         text: include_str!("../../experiments/physical-technical-converged.toml"),
@@ -466,6 +466,16 @@ const FILES: [FileWalk; 6] = [
         text: include_str!("../../experiments/physical-technical-converged-period-band.toml"),
         key: "band",
         label: "band file: each of 16-30 steps per cycle",
+    },
+    // The band file with its steps capped at the legs' reach and aimed
+    // short by their overreach: the file whose optima keep every distance
+    // bound (docs/walk.md, "Steps aimed short by the legs' overreach").
+    FileWalk {
+        text: include_str!(
+            "../../experiments/physical-technical-converged-period-band-reach-aim.toml"
+        ),
+        key: "band_reach_aim",
+        label: "reach-aim file: the band's, steps capped and aimed",
     },
 ];
 
