@@ -475,7 +475,7 @@ const FILES: [FileWalk; 7] = [
             "../../experiments/physical-technical-converged-period-band-reach-aim.toml"
         ),
         key: "band_reach_aim",
-        label: "reach-aim file: the band's, steps capped and aimed",
+        label: "reach-aim file: the band's, capped, aimed",
     },
 ];
 
