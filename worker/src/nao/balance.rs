@@ -1530,6 +1530,47 @@ mod tests {
         assert!(off > 1.1 && off > aimed + 0.015, "{aimed} {off}");
     }
 
+    /// Experiment 1 on the band with the steps aimed short
+    /// (`experiments/physical-converged-band-aim.toml`): every thigh walks
+    /// the same plan, and with the aim the distance has an interior optimum
+    /// in ThighRelHip2_Z. Measured, 20 trials from 777 (s 1.00 at each):
+    /// −0.10 walks 4.241 m, −0.075 4.593 m (1.06 × its plan), −0.04 (the
+    /// expert) 4.076 m; without the aim −0.10 walks 4.541 m, past its plan,
+    /// so there the deep crouch still wins over most of the range.
+    #[test]
+    fn experiment_ones_thigh_has_an_interior_optimum_with_the_aim() {
+        let (_, physics, expert) = shipped(include_str!(
+            "../../../experiments/physical-converged-band-aim.toml"
+        ));
+        assert_eq!(expert.given(Param::StepAim), Some(0.3));
+        let thigh = |v: f64| with_values(expert, &[("ThighRelHip2_Z", v)]);
+        let walk = |p: &ParamValues| {
+            let ((s, mx, _), planned) = twenty_from_777(p, physics);
+            assert!((s - 1.0).abs() < 1e-12, "{s}");
+            (mx, planned)
+        };
+        let (deep, _) = walk(&thigh(-0.10));
+        let (peak, planned) = walk(&thigh(-0.075));
+        let (standard, _) = walk(&expert);
+        println!("aimed: -0.10 {deep:.3} m, -0.075 {peak:.3} m, expert {standard:.3} m");
+        assert!(
+            peak > deep + 0.2 && peak > standard + 0.3,
+            "{deep} {peak} {standard}"
+        );
+        assert!(
+            (peak - planned).abs() <= 0.1 * planned,
+            "{peak} of {planned}"
+        );
+        let mut unaimed = thigh(-0.10);
+        unaimed.set(Param::StepAim, 0.0).unwrap();
+        let (deep_off, planned) = walk(&unaimed);
+        println!("as planned: -0.10 {deep_off:.3} m of {planned:.3} m");
+        assert!(
+            deep_off > planned && deep_off > deep + 0.2,
+            "{deep_off} {deep}"
+        );
+    }
+
     /// The pace issue's 6.0 m, reached on converged physics with the step
     /// period co-optimised (`experiments/physical-technical-converged-period.toml`):
     /// the best set its 500 iterations found (Optim.1, iteration 369, as
