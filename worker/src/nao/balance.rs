@@ -1385,6 +1385,25 @@ mod tests {
         println!("expert s {s}, {mx:.3} m of {planned:.3} m; L {window:.2}°");
     }
 
+    /// The reach-aim file (the band with its steps capped at the legs' reach
+    /// and aimed short) keeps the pace issue's stop bounds: its expert
+    /// walks ≥ 4.0 m over 100 trials from 777, within 10 % of its plan and
+    /// 1° of every stop, and L's 64 corners and centre, each walked with
+    /// the cap and the aim, stay within 2° of their stops.
+    #[test]
+    fn the_reach_aim_file_keeps_the_expert_and_l_within_their_stops() {
+        let (exp, physics, expert) = shipped(include_str!(
+            "../../../experiments/physical-technical-converged-period-band-reach-aim.toml"
+        ));
+        assert_eq!(expert.given(Param::StepAim), Some(0.3));
+        assert_eq!(expert.given(Param::StepReach), Some(1.0));
+        let (_, s, mx, planned) = walks_at_pace_within_the_stops(&expert, 100, physics);
+        let sets = corners_of_l(&exp, true);
+        assert_eq!(sets.len(), 65);
+        let window = within_two_degrees_over(&sets, physics);
+        println!("expert s {s}, {mx:.3} m of {planned:.3} m; L {window:.2}°");
+    }
+
     /// Experiment 2 on the band with the expert at 0.17 s (session 28's run
     /// of `experiments/physical-technical-converged-period-band.toml`,
     /// Optim.1 of iteration 494 as `naofarm report` printed it) finds the
