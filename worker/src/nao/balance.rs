@@ -1376,10 +1376,21 @@ mod tests {
             expert.given(protocol::params::Param::StepPeriod),
             Some(0.17)
         );
-        let (ts, s, mx, planned) = walks_at_pace_within_the_stops(&expert, 100, physics);
+        band_expert_and_l_within_their_stops(&exp, physics, &expert);
+    }
+
+    /// A band file's expert over 100 trials from 777, each at its drawn
+    /// step (every step of the 15 drawn), at the pace issue's distance and
+    /// within 1° of every stop; and its L's 64 corners and centre within 2°.
+    fn band_expert_and_l_within_their_stops(
+        exp: &protocol::Experiment,
+        physics: SimSettings,
+        expert: &ParamValues,
+    ) {
+        let (ts, s, mx, planned) = walks_at_pace_within_the_stops(expert, 100, physics);
         let drawn: std::collections::BTreeSet<u32> = ts.iter().map(|t| t.substeps).collect();
         assert_eq!(drawn.len(), 15, "every step of the band drawn: {drawn:?}");
-        let sets = corners_of_l(&exp, true);
+        let sets = corners_of_l(exp, true);
         assert_eq!(sets.len(), 65);
         let window = within_two_degrees_over(&sets, physics);
         println!("expert s {s}, {mx:.3} m of {planned:.3} m; L {window:.2}°");
@@ -1397,11 +1408,7 @@ mod tests {
         ));
         assert_eq!(expert.given(Param::StepAim), Some(0.3));
         assert_eq!(expert.given(Param::StepReach), Some(1.0));
-        let (_, s, mx, planned) = walks_at_pace_within_the_stops(&expert, 100, physics);
-        let sets = corners_of_l(&exp, true);
-        assert_eq!(sets.len(), 65);
-        let window = within_two_degrees_over(&sets, physics);
-        println!("expert s {s}, {mx:.3} m of {planned:.3} m; L {window:.2}°");
+        band_expert_and_l_within_their_stops(&exp, physics, &expert);
     }
 
     /// Experiment 2 on the band with the expert at 0.17 s (session 28's run
