@@ -464,9 +464,11 @@ mod tests {
         assert_eq!(load(&mut g, 45.0, 15.0), None);
     }
 
-    /// The feedback is what keeps the fast walk going: without it the expert
-    /// set falls more or walks clearly shorter (0.15 m is five standard errors
-    /// of 20 trials' mean).
+    /// The feedback is what keeps the fast walk going on the farm's default
+    /// physics (2 × 10 ms): without it the expert set falls more or walks
+    /// clearly shorter (0.15 m is five standard errors of 20 trials' mean).
+    /// On the band of fine steps it is not (`scripts/feedback.py`;
+    /// docs/walk.md, "Is the feedback load-bearing on the band?").
     #[test]
     fn the_feedback_is_used() {
         let go = |engine: Engine| {
