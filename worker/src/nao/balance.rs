@@ -1413,6 +1413,20 @@ mod tests {
         band_expert_and_l_within_their_stops(&exp, physics, &expert);
     }
 
+    /// The reach-aim file with the reach 10 % wider (`step_reach = 1.1`)
+    /// keeps the same stop bounds: L's long-step corners, now planned
+    /// longer, stay within 2° of their stops, and the expert (whose step the
+    /// cap does not shorten) within 1°.
+    #[test]
+    fn the_wider_reach_file_keeps_the_expert_and_l_within_their_stops() {
+        let (exp, physics, expert) = shipped(include_str!(
+            "../../../experiments/physical-technical-converged-period-band-reach11-aim.toml"
+        ));
+        assert_eq!(expert.given(Param::StepAim), Some(0.3));
+        assert_eq!(expert.given(Param::StepReach), Some(1.1));
+        band_expert_and_l_within_their_stops(&exp, physics, &expert);
+    }
+
     /// Experiment 2 on the band with the expert at 0.17 s (session 28's run
     /// of `experiments/physical-technical-converged-period-band.toml`,
     /// Optim.1 of iteration 494 as `naofarm report` printed it) finds the
