@@ -830,6 +830,7 @@ expert = -0.04
             "physical-converged-band-aim.toml",
             "physical-technical-converged-period-band-reach.toml",
             "physical-technical-converged-period-band-reach-aim.toml",
+            "physical-technical-converged-period-band-reach11-aim.toml",
             "physical-stiff.toml",
             "physical-firm.toml",
             "physical-technical-stiff.toml",
@@ -854,13 +855,19 @@ expert = -0.04
                 | "physical-converged-band.toml"
                 | "physical-converged-band-aim.toml"
                 | "physical-technical-converged-period-band-reach.toml"
-                | "physical-technical-converged-period-band-reach-aim.toml" => (16, 30),
+                | "physical-technical-converged-period-band-reach-aim.toml"
+                | "physical-technical-converged-period-band-reach11-aim.toml" => (16, 30),
                 _ => (e.physics.substeps, 0),
             };
             assert_eq!((e.physics.substeps, e.physics.substeps_max), band, "{f}");
-            // Only the reach files cap the plan's steps, and only the aim
-            // files aim them short by the legs' overreach.
-            let reach = f.contains("band-reach").then_some(&1.0);
+            // Only the reach files cap the plan's steps (the reach11 file
+            // 10 % wider), and only the aim files aim them short by the
+            // legs' overreach.
+            let reach = if f.contains("band-reach11") {
+                Some(&1.1)
+            } else {
+                f.contains("band-reach").then_some(&1.0)
+            };
             assert_eq!(e.fixed.get("step_reach"), reach, "{f}");
             let aim = f.ends_with("-aim.toml").then_some(&0.3);
             assert_eq!(e.fixed.get("step_aim"), aim, "{f}");
