@@ -1572,6 +1572,53 @@ mod tests {
         assert!(off > 1.1 && off > aimed + 0.015, "{aimed} {off}");
     }
 
+    /// Experiment 2 on the reach-aim file with the reach 10 % wider
+    /// (session 32's run of
+    /// `experiments/physical-technical-converged-period-band-reach11-aim.toml`,
+    /// seed 1; Optim.1 and Optim.2 as `naofarm report` printed them). Both
+    /// walk the pace issue's whole distance bound over the band's draw, now
+    /// on a plan of 6.0 m or more rather than beyond a shorter one: ≥ 6.0 m,
+    /// s ≥ 0.9, my/mx ≤ 0.25, within 10 % of their plan and 1° of every stop
+    /// (measured, 100 trials from 777: 6.316 m of 6.006 m planned, 1.05 ×,
+    /// and 6.088 m of 6.134 m, 0.99 ×; s 1.00).
+    #[test]
+    fn the_wider_reach_runs_optima_walk_six_metres_on_a_six_metre_plan() {
+        let (exp, physics, _) = shipped(include_str!(
+            "../../../experiments/physical-technical-converged-period-band-reach11-aim.toml"
+        ));
+        let optim1 = found_in(
+            &exp,
+            &[
+                ("ThighRelHip2_Z", -0.07900423429969812),
+                ("ratio_flexion", 0.717971394503071),
+                ("long_offset_MidAnkles_2_Torso_Init", 0.007978654172390104),
+                ("height_lift", 0.03640426114690867),
+                ("xlength_step_max", 0.08856005054477481),
+                ("step_period", 0.12205118441994006),
+            ],
+        );
+        let optim2 = found_in(
+            &exp,
+            &[
+                ("ThighRelHip2_Z", -0.07604692681097201),
+                ("ratio_flexion", 0.7431630383966894),
+                ("long_offset_MidAnkles_2_Torso_Init", 0.009487430656550472),
+                ("height_lift", 0.03755894873760762),
+                ("xlength_step_max", 0.10975664028581887),
+                ("step_period", 0.13011434086645657),
+            ],
+        );
+        for (name, optim) in [("Optim.1", &optim1), ("Optim.2", &optim2)] {
+            assert_eq!(optim.given(Param::StepReach), Some(1.1));
+            let (_, s, mx, planned) = walks_at_pace_within_the_stops(optim, 100, physics);
+            println!("{name}: s {s}, {mx:.3} m of {planned:.3} m planned");
+            assert!(
+                s >= 0.9 && mx >= 6.0 && planned >= 6.0,
+                "{s} {mx} {planned}"
+            );
+        }
+    }
+
     /// Experiment 1 on the band with the steps aimed short
     /// (`experiments/physical-converged-band-aim.toml`): every thigh walks
     /// the same plan, and with the aim the distance has an interior optimum
