@@ -16,12 +16,12 @@ Defaults: 5 trials, target/release/naofarm. About 6 min on 2 cores for a
 six-parameter file at 5 trials (65 sets, twice).
 """
 
-import itertools
 import json
 import statistics
 import subprocess
 import sys
-import tomllib
+
+from stops import bounds, corners_and_centre
 
 
 def trial(binary, path, trials, params, extra):
@@ -41,16 +41,7 @@ def main():
     path = sys.argv[1]
     trials = int(sys.argv[2]) if len(sys.argv) > 2 else 5
     binary = sys.argv[3] if len(sys.argv) > 3 else "target/release/naofarm"
-    with open(path, "rb") as f:
-        exp = tomllib.load(f)
-    params = exp["parameter"]
-    sets = [("expert", {})]
-    for bits in itertools.product((0, 1), repeat=len(params)):
-        corner = {p["name"]: (p["upper"] if b else p["lower"])
-                  for p, b in zip(params, bits)}
-        sets.append(("corner " + "".join(map(str, bits)), corner))
-    sets.append(("centre", {p["name"]: (p["lower"] + p["upper"]) / 2
-                            for p in params}))
+    sets = [("expert", {})] + corners_and_centre(bounds(path))
     print(f"{'set':<16} {'planned':>8}  {'s':>4} {'mx':>7}  "
           f"{'s off':>5} {'mx off':>7}")
     diffs, falls_more, shorter, longer = [], [], [], []

@@ -32,6 +32,16 @@ def bounds(path):
         return [(p["name"], p["lower"], p["upper"]) for p in tomllib.load(f)["parameter"]]
 
 
+def corners_and_centre(L):
+    """L's corners (every parameter at its lower or upper bound, labelled by
+    its bits in L's order, 1: upper) and its centre, as (label, values)."""
+    sets = [("corner " + "".join(map(str, bits)),
+             {n: (hi if bit else lo) for (n, lo, hi), bit in zip(L, bits)})
+            for bits in itertools.product([0, 1], repeat=len(L))]
+    sets.append(("centre", {n: (lo + hi) / 2 for n, lo, hi in L}))
+    return sets
+
+
 def trial(a, params, substeps, seed, trials):
     cmd = [a.bin, "trial", "--walk", "closed-loop", "--json", "--threads", "1",
            "--trials", str(trials), "--seed", str(seed)]
@@ -70,9 +80,7 @@ def main():
     if a.substeps is None:
         a.substeps = [None] if a.experiment else [2, 3, 5, 10]
     L = bounds(a.experiment or "experiments/physical-technical.toml")
-    sets = [{n: (hi if bit else lo) for (n, lo, hi), bit in zip(L, bits)}
-            for bits in itertools.product([0, 1], repeat=len(L))]
-    sets.append({n: (lo + hi) / 2 for n, lo, hi in L})
+    sets = [values for _, values in corners_and_centre(L)]
     print("| physics | expert: hip yaw-pitch | expert: others | L: hip yaw-pitch "
           "| L: others | L: falls of 33 | expert: s, mx (m) |")
     print("|---|---|---|---|---|---|---|")
