@@ -491,9 +491,9 @@ mod tests {
         the_expert_falls_or_walks_shorter_without_feedback(&expert, physics);
     }
 
-    /// Asserts that `params` with `physics`, 20 trials from seed 3, falls in
-    /// a fifth more of them without the closed loop's feedback, or walks at
-    /// least 0.15 m shorter.
+    /// Asserts that `params` with `physics`, 20 trials from seed 3, stands in
+    /// more than a fifth fewer of them without the closed loop's feedback, or
+    /// walks more than 0.15 m shorter.
     fn the_expert_falls_or_walks_shorter_without_feedback(
         params: &ParamValues,
         physics: SimSettings,
