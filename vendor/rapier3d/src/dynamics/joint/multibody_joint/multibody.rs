@@ -815,8 +815,14 @@ impl Multibody {
     }
 
     fn update_body_jacobians(&mut self) {
+        let mut chain = Vec::new();
         for i in 0..self.links.len() {
             let link = &self.links[i];
+            // A link's jacobian is zero outside its chain's columns (the
+            // parent's chain and its own joint's): the products below are
+            // formed on those columns only, with nalgebra's arithmetic per
+            // column, and the others keep the zeros copied from the root.
+            chain_dof_ranges(&self.links, i, &mut chain);
 
             if self.body_jacobians[i].ncols() != self.ndofs {
                 // TODO: use a resize instead.
@@ -838,7 +844,14 @@ impl Multibody {
                     let parent_j_w = parent_j.fixed_rows::<ANG_DIM>(DIM);
 
                     let shift_tr = vect_to_na(link.shift02).gcross_matrix_tr();
-                    link_j_v.gemm(1.0, &shift_tr, &parent_j_w, 1.0);
+                    for &(cs, cl) in &chain {
+                        link_j_v.columns_mut(cs, cl).gemm(
+                            1.0,
+                            &shift_tr,
+                            &parent_j_w.columns(cs, cl),
+                            1.0,
+                        );
+                    }
                 }
             } else {
                 self.body_jacobians[i].fill(0.0);
@@ -860,7 +873,14 @@ impl Multibody {
                 let (mut link_j_v, link_j_w) =
                     link_j.rows_range_pair_mut(0..DIM, DIM..DIM + ANG_DIM);
                 let shift_tr = vect_to_na(link.shift23).gcross_matrix_tr();
-                link_j_v.gemm(1.0, &shift_tr, &link_j_w, 1.0);
+                for &(cs, cl) in &chain {
+                    link_j_v.columns_mut(cs, cl).gemm(
+                        1.0,
+                        &shift_tr,
+                        &link_j_w.columns(cs, cl),
+                        1.0,
+                    );
+                }
             }
         }
     }
@@ -972,33 +992,38 @@ impl Multibody {
                 let (coriolis_v, parent_coriolis_v) = self.coriolis_v.index_mut2(i, parent_id);
                 let (coriolis_w, parent_coriolis_w) = self.coriolis_w.index_mut2(i, parent_id);
 
+                // The parent's Coriolis columns are zero outside its chain,
+                // and its jacobian too: every product below is formed on
+                // this link's chain only (a superset of the parent's), with
+                // nalgebra's arithmetic per column (its small `gemm` is one
+                // `gemv` per column), and the other columns stay zero.
                 coriolis_v.copy_from(parent_coriolis_v);
                 coriolis_w.copy_from(parent_coriolis_w);
 
                 // [c1 - c0].gcross() * (JDot + JDot/u * qdot)"
                 let shift_cross_tr = vect_to_na(link.shift02).gcross_matrix_tr();
-                coriolis_v.gemm(1.0, &shift_cross_tr, parent_coriolis_w, 1.0);
-
                 // JDot (but the 2.0 originates from the sum of two identical terms in JDot and JDot/u * gdot)
                 let dvel_cross = vect_to_na(
                     rb.vels.angvel.gcross(link.shift02) + 2.0 * link.joint_velocity.linvel,
                 )
                 .gcross_matrix_tr();
-                coriolis_v.gemm(1.0, &dvel_cross, &parent_j_w, 1.0);
-
                 // JDot/u * qdot
-                coriolis_v.gemm(
-                    1.0,
-                    &vect_to_na(link.joint_velocity.linvel).gcross_matrix_tr(),
-                    &parent_j_w,
-                    1.0,
-                );
-                coriolis_v.gemm(1.0, &(parent_w * shift_cross_tr), &parent_j_w, 1.0);
-
+                let linvel_cross_tr = vect_to_na(link.joint_velocity.linvel).gcross_matrix_tr();
+                let parent_w_shift = parent_w * shift_cross_tr;
                 #[cfg(feature = "dim3")]
-                {
-                    let vel_wrt_joint_w = vect_to_na(link.joint_velocity.angvel).gcross_matrix();
-                    coriolis_w.gemm(-1.0, &vel_wrt_joint_w, &parent_j_w, 1.0);
+                let vel_wrt_joint_w = vect_to_na(link.joint_velocity.angvel).gcross_matrix();
+
+                for &(cs, cl) in &chain {
+                    let mut cv = coriolis_v.columns_mut(cs, cl);
+                    let pj_w = parent_j_w.columns(cs, cl);
+                    cv.gemm(1.0, &shift_cross_tr, &parent_coriolis_w.columns(cs, cl), 1.0);
+                    cv.gemm(1.0, &dvel_cross, &pj_w, 1.0);
+                    cv.gemm(1.0, &linvel_cross_tr, &pj_w, 1.0);
+                    cv.gemm(1.0, &parent_w_shift, &pj_w, 1.0);
+                    #[cfg(feature = "dim3")]
+                    coriolis_w
+                        .columns_mut(cs, cl)
+                        .gemm(-1.0, &vel_wrt_joint_w, &pj_w, 1.0);
                 }
 
                 // JDot (but the 2.0 originates from the sum of two identical terms in JDot and JDot/u * gdot)
@@ -1034,19 +1059,20 @@ impl Multibody {
             {
                 // [c3 - c2].gcross() * (JDot + JDot/u * qdot)
                 let shift_cross_tr = vect_to_na(link.shift23).gcross_matrix_tr();
-                coriolis_v.gemm(1.0, &shift_cross_tr, coriolis_w, 1.0);
-
                 // JDot
                 let dvel_cross = vect_to_na(rb.vels.angvel.gcross(link.shift23)).gcross_matrix_tr();
-                coriolis_v.gemm(1.0, &dvel_cross, &rb_j_w, 1.0);
-
                 // JDot/u * qdot
-                coriolis_v.gemm(
-                    1.0,
-                    &(SimdAngVector::<Real>::from(rb.vels.angvel).gcross_matrix() * shift_cross_tr),
-                    &rb_j_w,
-                    1.0,
-                );
+                let w_shift =
+                    SimdAngVector::<Real>::from(rb.vels.angvel).gcross_matrix() * shift_cross_tr;
+
+                // On the link's chain only, as above.
+                for &(cs, cl) in &chain {
+                    let mut cv = coriolis_v.columns_mut(cs, cl);
+                    let j_w = rb_j_w.columns(cs, cl);
+                    cv.gemm(1.0, &shift_cross_tr, &coriolis_w.columns(cs, cl), 1.0);
+                    cv.gemm(1.0, &dvel_cross, &j_w, 1.0);
+                    cv.gemm(1.0, &w_shift, &j_w, 1.0);
+                }
             }
 
             let coriolis_v = &mut self.coriolis_v[i];
@@ -1055,13 +1081,17 @@ impl Multibody {
             /*
              * Meld with the mass matrix.
              */
+            // On the link's chain only: the product below reads no other
+            // columns.
             {
-                let mut i_coriolis_dt_v = self.i_coriolis_dt.fixed_rows_mut::<DIM>(0);
-                i_coriolis_dt_v.copy_from(coriolis_v);
                 let rb_mass_dt = vect_to_na(rb_mass * dt);
-                i_coriolis_dt_v
-                    .column_iter_mut()
-                    .for_each(|mut c| c.component_mul_assign(&rb_mass_dt));
+                let mut i_coriolis_dt_v = self.i_coriolis_dt.fixed_rows_mut::<DIM>(0);
+                for &(cs, cl) in &chain {
+                    let mut part = i_coriolis_dt_v.columns_mut(cs, cl);
+                    part.copy_from(&coriolis_v.columns(cs, cl));
+                    part.column_iter_mut()
+                        .for_each(|mut c| c.component_mul_assign(&rb_mass_dt));
+                }
             }
 
             #[cfg(feature = "dim2")]
@@ -1073,7 +1103,15 @@ impl Multibody {
             #[cfg(feature = "dim3")]
             {
                 let mut i_coriolis_dt_w = self.i_coriolis_dt.fixed_rows_mut::<ANG_DIM>(DIM);
-                i_coriolis_dt_w.gemm(dt, &mat_to_na(rb_inertia), coriolis_w, 0.0);
+                let inertia = mat_to_na(rb_inertia);
+                for &(cs, cl) in &chain {
+                    i_coriolis_dt_w.columns_mut(cs, cl).gemm(
+                        dt,
+                        &inertia,
+                        &coriolis_w.columns(cs, cl),
+                        0.0,
+                    );
+                }
             }
 
             // `acc_augmented_mass += rb_j^T * i_coriolis_dt`, on the link's chain only:
@@ -1279,6 +1317,7 @@ impl Multibody {
             let drift = q2 - c.coeff * q1 - c.offset;
 
             out[i] = GenericJointConstraint {
+                unit_dof2: u32::MAX,
                 is_rigid_body1: false,
                 solver_vel1: u32::MAX,
                 ndofs1: 0,

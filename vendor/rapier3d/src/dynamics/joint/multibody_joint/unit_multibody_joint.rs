@@ -59,6 +59,7 @@ pub fn unit_joint_limit_constraint(
     let cfm_gain = lhs * cfm_coeff;
 
     let constraint = GenericJointConstraint {
+        unit_dof2: (dof_id + link.assembly_id) as u32,
         is_rigid_body1: false,
         solver_vel1: u32::MAX,
         ndofs1: 0,
@@ -119,6 +120,7 @@ pub fn unit_joint_friction_constraint(
     let cfm_gain = lhs * cfm_coeff;
 
     let constraint = GenericJointConstraint {
+        unit_dof2: (dof_id + link.assembly_id) as u32,
         is_rigid_body1: false,
         solver_vel1: u32::MAX,
         ndofs1: 0,
@@ -191,6 +193,7 @@ pub fn unit_joint_motor_constraint(
     rhs_wo_bias += -target_vel;
 
     let constraint = GenericJointConstraint {
+        unit_dof2: (dof_id + link.assembly_id) as u32,
         is_rigid_body1: false,
         solver_vel1: u32::MAX,
         ndofs1: 0,

@@ -18,6 +18,12 @@ pub struct GenericJointConstraint {
     pub j_id1: usize,
     pub ndofs2: usize,
     pub j_id2: usize,
+    /// naofarm's patch: `u32::MAX`, or the one degree of freedom (within
+    /// `solver_vel2`'s) that this row's second jacobian selects with a 1,
+    /// its other entries being zero (a multibody joint's servo, stop or
+    /// friction row, with no first body). `solve` then reads that velocity
+    /// instead of forming the dot product, whose other terms are zero.
+    pub unit_dof2: u32,
 
     pub joint_id: JointIndex,
 
@@ -41,6 +47,7 @@ impl Default for GenericJointConstraint {
 impl GenericJointConstraint {
     pub fn invalid() -> Self {
         Self {
+            unit_dof2: u32::MAX,
             is_rigid_body1: false,
             is_rigid_body2: false,
             solver_vel1: u32::MAX,
@@ -283,9 +290,15 @@ impl GenericJointConstraint {
         let j1 = DVectorView::from_slice(&jacobians[self.j_id1..], self.ndofs1);
         let vel1 = j1.dot(&solver_vel1);
 
-        let solver_vel2 = self.solver_vel2(solver_vels, generic_solver_vels);
-        let j2 = DVectorView::from_slice(&jacobians[self.j_id2..], self.ndofs2);
-        let vel2 = j2.dot(&solver_vel2);
+        let vel2 = if self.unit_dof2 != u32::MAX {
+            // The dot product's other terms are zeros: its sum is this
+            // velocity.
+            generic_solver_vels[self.solver_vel2 as usize + self.unit_dof2 as usize]
+        } else {
+            let solver_vel2 = self.solver_vel2(solver_vels, generic_solver_vels);
+            let j2 = DVectorView::from_slice(&jacobians[self.j_id2..], self.ndofs2);
+            j2.dot(&solver_vel2)
+        };
 
         let dvel = self.rhs + (vel2 - vel1);
         let total_impulse = na::clamp(
@@ -295,6 +308,9 @@ impl GenericJointConstraint {
         );
         let delta_impulse = total_impulse - self.impulse;
         self.impulse = total_impulse;
+        if delta_impulse == 0.0 {
+            return;
+        }
 
         let mut solver_vel1 = self.solver_vel1_mut(solver_vels, generic_solver_vels);
         let wj1 = DVectorView::from_slice(&jacobians[self.wj_id1()..], self.ndofs1);
