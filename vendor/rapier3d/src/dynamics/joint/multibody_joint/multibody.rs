@@ -47,33 +47,6 @@ fn concat_rb_mass_matrix(mass: Vector, inertia: Real) -> SMatrix<Real, SPATIAL_D
     result
 }
 
-/// The generalized coordinates link `i`'s body jacobian can be non-zero on: the
-/// DoF ranges `(start, len)` of the links from the root to `i`, sorted and merged
-/// where contiguous. Every other column of that jacobian is exactly zero.
-fn chain_dof_ranges(links: &MultibodyLinkVec, i: usize, out: &mut Vec<(usize, usize)>) {
-    out.clear();
-    let mut curr = Some(i);
-    while let Some(id) = curr {
-        let link = &links[id];
-        let n = link.joint.ndofs();
-        if n > 0 {
-            out.push((link.assembly_id, n));
-        }
-        curr = link.parent_id();
-    }
-    out.sort_unstable();
-    let mut merged = 0;
-    for k in 0..out.len() {
-        if merged > 0 && out[merged - 1].0 + out[merged - 1].1 == out[k].0 {
-            out[merged - 1].1 += out[k].1;
-        } else {
-            out[merged] = out[k];
-            merged += 1;
-        }
-    }
-    out.truncate(merged);
-}
-
 /// `out += rhs^T * mid * rhs` where `rhs` is zero outside the columns `ranges`:
 /// the same arithmetic, entry for entry, as nalgebra's `quadform(1.0, mid, rhs,
 /// 1.0)`, without the products of zeros (whose sums leave `out` unchanged).
@@ -154,6 +127,9 @@ pub struct Multibody {
     pub(crate) accelerations: DVector,
 
     body_jacobians: Vec<Jacobian<Real>>,
+    // naofarm's patch: each link's degrees of freedom from the root, as
+    // sorted, merged ranges of columns (`update_link_chains`).
+    link_chains: Vec<Vec<(usize, usize)>>,
     // NOTE: the mass matrices are dimensioned based on the non-kinematic degrees of
     //       freedoms only. The `Self::augmented_mass_permutation` sequence can be used to
     //       move dofs from/to a format that matches the augmented mass.
@@ -205,6 +181,7 @@ impl Multibody {
             frictions: DVector::zeros(0),
             accelerations: DVector::zeros(0),
             body_jacobians: Vec::new(),
+            link_chains: Vec::new(),
             augmented_mass: DMatrix::zeros(0, 0),
             inv_augmented_mass: LU::new(DMatrix::zeros(0, 0)),
             acc_augmented_mass: DMatrix::zeros(0, 0),
@@ -814,15 +791,44 @@ impl Multibody {
         }
     }
 
+    /// naofarm's patch: each link's chain, the columns of its degrees of
+    /// freedom and its ancestors', as sorted ranges with the adjacent ones
+    /// merged. A link's body jacobian is exactly zero outside them. Links
+    /// come after their parent, and their `assembly_id`s in link order (the
+    /// mass matrix asserts it), so a chain is its parent's with the link's
+    /// own range appended.
+    fn update_link_chains(&mut self) {
+        let mut chains = core::mem::take(&mut self.link_chains);
+        chains.resize_with(self.links.len(), Vec::new);
+        for i in 0..self.links.len() {
+            let link = &self.links[i];
+            let mut chain = core::mem::take(&mut chains[i]);
+            chain.clear();
+            if i != 0 {
+                chain.extend_from_slice(&chains[link.parent_internal_id]);
+            }
+            let (start, n) = (link.assembly_id, link.joint.ndofs());
+            if n > 0 {
+                match chain.last_mut() {
+                    Some(last) if last.0 + last.1 == start => last.1 += n,
+                    _ => chain.push((start, n)),
+                }
+            }
+            chains[i] = chain;
+        }
+        self.link_chains = chains;
+    }
+
     fn update_body_jacobians(&mut self) {
-        let mut chain = Vec::new();
+        self.update_link_chains();
+        let chains = core::mem::take(&mut self.link_chains);
         for i in 0..self.links.len() {
             let link = &self.links[i];
             // A link's jacobian is zero outside its chain's columns (the
             // parent's chain and its own joint's): the products below are
             // formed on those columns only, with nalgebra's arithmetic per
             // column, and the others keep the zeros copied from the root.
-            chain_dof_ranges(&self.links, i, &mut chain);
+            let chain = chains[i].as_slice();
 
             if self.body_jacobians[i].ncols() != self.ndofs {
                 // TODO: use a resize instead.
@@ -844,7 +850,7 @@ impl Multibody {
                     let parent_j_w = parent_j.fixed_rows::<ANG_DIM>(DIM);
 
                     let shift_tr = vect_to_na(link.shift02).gcross_matrix_tr();
-                    for &(cs, cl) in &chain {
+                    for &(cs, cl) in chain {
                         link_j_v.columns_mut(cs, cl).gemm(
                             1.0,
                             &shift_tr,
@@ -873,7 +879,7 @@ impl Multibody {
                 let (mut link_j_v, link_j_w) =
                     link_j.rows_range_pair_mut(0..DIM, DIM..DIM + ANG_DIM);
                 let shift_tr = vect_to_na(link.shift23).gcross_matrix_tr();
-                for &(cs, cl) in &chain {
+                for &(cs, cl) in chain {
                     link_j_v.columns_mut(cs, cl).gemm(
                         1.0,
                         &shift_tr,
@@ -883,6 +889,7 @@ impl Multibody {
                 }
             }
         }
+        self.link_chains = chains;
     }
 
     pub(crate) fn update_mass_matrix(&mut self, dt: Real, bodies: &RigidBodySet) {
@@ -911,7 +918,10 @@ impl Multibody {
         }
 
         let mut curr_assembly_id = 0;
-        let mut chain = Vec::new();
+        if self.link_chains.len() != self.links.len() {
+            self.update_link_chains();
+        }
+        let chains = core::mem::take(&mut self.link_chains);
 
         for i in 0..self.links.len() {
             let link = &self.links[i];
@@ -957,18 +967,18 @@ impl Multibody {
             let rb_mass_matrix_wo_gyro = concat_rb_mass_matrix(rb_mass, rb_inertia.into());
             #[allow(clippy::useless_conversion)] // Needed in 3D, no-op in 2D
             let rb_mass_matrix = concat_rb_mass_matrix(rb_mass, augmented_inertia.into());
-            chain_dof_ranges(&self.links, i, &mut chain);
+            let chain = chains[i].as_slice();
             sparse_quadform(
                 &mut self.augmented_mass,
                 &rb_mass_matrix_wo_gyro,
                 body_jacobian,
-                &chain,
+                chain,
             );
             sparse_quadform(
                 &mut self.acc_augmented_mass,
                 &rb_mass_matrix,
                 body_jacobian,
-                &chain,
+                chain,
             );
 
             /*
@@ -1013,7 +1023,7 @@ impl Multibody {
                 #[cfg(feature = "dim3")]
                 let vel_wrt_joint_w = vect_to_na(link.joint_velocity.angvel).gcross_matrix();
 
-                for &(cs, cl) in &chain {
+                for &(cs, cl) in chain {
                     let mut cv = coriolis_v.columns_mut(cs, cl);
                     let pj_w = parent_j_w.columns(cs, cl);
                     cv.gemm(1.0, &shift_cross_tr, &parent_coriolis_w.columns(cs, cl), 1.0);
@@ -1066,7 +1076,7 @@ impl Multibody {
                     SimdAngVector::<Real>::from(rb.vels.angvel).gcross_matrix() * shift_cross_tr;
 
                 // On the link's chain only, as above.
-                for &(cs, cl) in &chain {
+                for &(cs, cl) in chain {
                     let mut cv = coriolis_v.columns_mut(cs, cl);
                     let j_w = rb_j_w.columns(cs, cl);
                     cv.gemm(1.0, &shift_cross_tr, &coriolis_w.columns(cs, cl), 1.0);
@@ -1086,7 +1096,7 @@ impl Multibody {
             {
                 let rb_mass_dt = vect_to_na(rb_mass * dt);
                 let mut i_coriolis_dt_v = self.i_coriolis_dt.fixed_rows_mut::<DIM>(0);
-                for &(cs, cl) in &chain {
+                for &(cs, cl) in chain {
                     let mut part = i_coriolis_dt_v.columns_mut(cs, cl);
                     part.copy_from(&coriolis_v.columns(cs, cl));
                     part.column_iter_mut()
@@ -1104,7 +1114,7 @@ impl Multibody {
             {
                 let mut i_coriolis_dt_w = self.i_coriolis_dt.fixed_rows_mut::<ANG_DIM>(DIM);
                 let inertia = mat_to_na(rb_inertia);
-                for &(cs, cl) in &chain {
+                for &(cs, cl) in chain {
                     i_coriolis_dt_w.columns_mut(cs, cl).gemm(
                         dt,
                         &inertia,
@@ -1116,10 +1126,10 @@ impl Multibody {
 
             // `acc_augmented_mass += rb_j^T * i_coriolis_dt`, on the link's chain only:
             // both factors are zero outside it.
-            for &(cs, cl) in &chain {
+            for &(cs, cl) in chain {
                 for j in cs..cs + cl {
                     let rhs = self.i_coriolis_dt.column(j);
-                    for &(rs, rl) in &chain {
+                    for &(rs, rl) in chain {
                         self.acc_augmented_mass
                             .column_mut(j)
                             .rows_mut(rs, rl)
@@ -1128,6 +1138,7 @@ impl Multibody {
                 }
             }
         }
+        self.link_chains = chains;
 
         /*
          * Damping and armature.
