@@ -491,6 +491,29 @@ mod tests {
         the_expert_falls_or_walks_shorter_without_feedback(&expert, physics);
     }
 
+    /// The arms walk at 4 × 5 ms keeps its bits: the one walk whose every
+    /// part of the vendored rapier is at work (26 degrees of freedom on four
+    /// branches, the firm stops' rows, four substeps), so a change there
+    /// that is meant to keep the bits is checked here as well as by the
+    /// open loop's pins. The values were read off `naofarm trial
+    /// --experiment experiments/physical-technical-arms-5ms.toml --seed 11
+    /// --trials 2 --json` built at 247508b, before session 34's cuts of the
+    /// multibody's work.
+    #[test]
+    fn the_arms_walk_at_5ms_keeps_its_bits() {
+        let (_, physics, expert) = shipped(include_str!(
+            "../../../experiments/physical-technical-arms-5ms.toml"
+        ));
+        for (seed, x, y) in [
+            (11, 4.458_668_231_964_111, 0.021_067_418_158_054_352),
+            (12, 3.977_905_511_856_079, -0.289_411_365_985_870_36),
+        ] {
+            let t = run(0, &expert, seed, 10.0, physics, closed()).unwrap();
+            assert_eq!(t.measurement.x_m.to_bits(), f64::to_bits(x), "seed {seed}");
+            assert_eq!(t.measurement.y_m.to_bits(), f64::to_bits(y), "seed {seed}");
+        }
+    }
+
     /// Asserts that `params` with `physics`, 20 trials from seed 3, stands in
     /// more than a fifth fewer of them without the closed loop's feedback, or
     /// walks more than 0.15 m shorter.
