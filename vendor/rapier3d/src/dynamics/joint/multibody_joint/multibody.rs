@@ -798,14 +798,15 @@ impl Multibody {
     /// mass matrix asserts it), so a chain is its parent's with the link's
     /// own range appended.
     fn update_link_chains(&mut self) {
-        let mut chains = core::mem::take(&mut self.link_chains);
+        let chains = &mut self.link_chains;
         chains.resize_with(self.links.len(), Vec::new);
         for i in 0..self.links.len() {
             let link = &self.links[i];
-            let mut chain = core::mem::take(&mut chains[i]);
+            let (ancestors, rest) = chains.split_at_mut(i);
+            let chain = &mut rest[0];
             chain.clear();
             if i != 0 {
-                chain.extend_from_slice(&chains[link.parent_internal_id]);
+                chain.extend_from_slice(&ancestors[link.parent_internal_id]);
             }
             let (start, n) = (link.assembly_id, link.joint.ndofs());
             if n > 0 {
@@ -814,9 +815,7 @@ impl Multibody {
                     _ => chain.push((start, n)),
                 }
             }
-            chains[i] = chain;
         }
-        self.link_chains = chains;
     }
 
     fn update_body_jacobians(&mut self) {
