@@ -848,6 +848,7 @@ fn bench_sim_reports_its_shares_over_rounds() {
     for key in [
         "closed_loop",
         "arms_5ms",
+        "arms_5ms_roll",
         "arms",
         "firm",
         "band",

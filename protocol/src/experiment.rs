@@ -839,6 +839,8 @@ expert = -0.04
             "physical-arms.toml",
             "physical-technical-arms-5ms.toml",
             "physical-arms-5ms.toml",
+            "physical-technical-arms-5ms-roll.toml",
+            "physical-arms-5ms-roll.toml",
         ] {
             let path = format!("{}/../experiments/{f}", env!("CARGO_MANIFEST_DIR"));
             let text = std::fs::read_to_string(&path).unwrap();
@@ -884,6 +886,13 @@ expert = -0.04
             }
             if f.contains("arms") {
                 assert_eq!(e.fixed.get("arm_swing"), Some(&0.4), "{f}");
+                // Only the roll files widen the stance hip's roll.
+                let roll = if f.ends_with("-roll.toml") {
+                    0.09
+                } else {
+                    0.07
+                };
+                assert_eq!(e.fixed.get("hip_roll_comp"), Some(&roll), "{f}");
                 assert_eq!(e.physics.firm_stop_window_deg, 8.0, "{f}");
                 assert!(e
                     .physics
@@ -893,7 +902,7 @@ expert = -0.04
                 assert_eq!(e.physics.firm_stop_window_deg, 3.0, "{f}");
             }
             if f.ends_with("firm.toml") || f.contains("arms") {
-                let substeps = if f.ends_with("5ms.toml") {
+                let substeps = if f.contains("5ms") {
                     4
                 } else {
                     Physics::default().substeps

@@ -430,7 +430,7 @@ impl FileWalk {
 }
 
 /// The files `bench sim` measures, the converged first.
-const FILES: [FileWalk; 7] = [
+const FILES: [FileWalk; 8] = [
     // Converged physics with its fixed values.
     FileWalk {
         text: include_str!("../../experiments/physical-technical-converged.toml"),
@@ -460,6 +460,13 @@ const FILES: [FileWalk; 7] = [
         text: include_str!("../../experiments/physical-technical-arms-5ms.toml"),
         key: "arms_5ms",
         label: "arms 5 ms file: the arms file's at 4x5ms",
+    },
+    // The arms file at 4 x 5 ms with the stance hip's roll at 0.09 rad:
+    // the file that keeps every bound of the pace issue but the speed.
+    FileWalk {
+        text: include_str!("../../experiments/physical-technical-arms-5ms-roll.toml"),
+        key: "arms_5ms_roll",
+        label: "roll file: the arms 5 ms, hip roll 0.09",
     },
     // The step-period file with each trial's step drawn from a band.
     FileWalk {

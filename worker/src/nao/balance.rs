@@ -474,6 +474,7 @@ mod tests {
         the_expert_falls_or_walks_shorter_without_feedback(
             &ParamValues::default(),
             SimSettings::default(),
+            (3, 20),
         );
     }
 
@@ -488,7 +489,22 @@ mod tests {
         let (_, physics, expert) = shipped(include_str!(
             "../../../experiments/physical-technical-arms-5ms.toml"
         ));
-        the_expert_falls_or_walks_shorter_without_feedback(&expert, physics);
+        the_expert_falls_or_walks_shorter_without_feedback(&expert, physics, (3, 20));
+    }
+
+    /// The feedback carries the arms walk at 4 × 5 ms with the stance hip's
+    /// roll at 0.09 rad too (docs/walk.md, "The engine's constants at 4 ×
+    /// 5 ms"), by less: over the 100 trials of Table IV (seeds 777–876) the
+    /// expert walks 4.276 m, s 1.00, with it and 4.089 m, s 0.96, without.
+    /// 20 trials from seed 3 cannot tell (4.147 and 4.092 m), so this test
+    /// takes the 100. Seed 1's Optim.1 of the file: 6.046 → 5.515 m (40
+    /// trials).
+    #[test]
+    fn the_feedback_carries_the_arms_walk_at_5ms_with_the_wider_hip_roll() {
+        let (_, physics, expert) = shipped(include_str!(
+            "../../../experiments/physical-technical-arms-5ms-roll.toml"
+        ));
+        the_expert_falls_or_walks_shorter_without_feedback(&expert, physics, (777, 100));
     }
 
     /// The arms walk at 4 × 5 ms keeps its bits: the one walk whose every
@@ -514,20 +530,21 @@ mod tests {
         }
     }
 
-    /// Asserts that `params` with `physics`, 20 trials from seed 3, stands in
-    /// more than a fifth fewer of them without the closed loop's feedback, or
-    /// walks more than 0.15 m shorter.
+    /// Asserts that `params` with `physics`, `n` trials from `seed0`, stands
+    /// in more than a fifth fewer of them without the closed loop's
+    /// feedback, or walks more than 0.15 m shorter.
     fn the_expert_falls_or_walks_shorter_without_feedback(
         params: &ParamValues,
         physics: SimSettings,
+        (seed0, n): (u64, u64),
     ) {
         let go = |engine: Engine| {
             let ts = run_many(
                 0,
                 params,
                 Batch {
-                    seed0: 3,
-                    n: 20,
+                    seed0,
+                    n,
                     threads: 2,
                 },
                 10.0,
@@ -992,6 +1009,42 @@ mod tests {
             (mx - planned).abs() <= 0.05 * planned,
             "{mx} m of {planned} m"
         );
+    }
+
+    /// The arms file at 4 × 5 ms with the stance hip's roll at 0.09 rad
+    /// (`experiments/physical-technical-arms-5ms-roll.toml`; docs/walk.md,
+    /// "The engine's constants at 4 × 5 ms") keeps the stops and finds the
+    /// 6 m at seed 1, where the 0.07 rad file's best stopped at 5.914 m: the
+    /// expert at pace as planned within 1° of every stop (30 trials), L's
+    /// corners and centre within 2°, and seed 1's Optim.1 (session 35's run)
+    /// over the 100 trials of Table IV at s ≥ 0.9 and ≥ 6.0 m, within 10 % of
+    /// its plan and 1° of every stop. Measured: L 0.30° at worst over seeds
+    /// 1–3 (`scripts/stops.py`); the optimum s 0.98, 6.034 m of 6.167 m
+    /// planned, 0.05° at worst.
+    #[test]
+    fn the_wider_hip_roll_at_5ms_keeps_the_stops_and_finds_six_metres_at_seed_1() {
+        let (exp, physics, expert) = shipped(include_str!(
+            "../../../experiments/physical-technical-arms-5ms-roll.toml"
+        ));
+        assert_eq!(
+            (physics.substeps, expert.given(Param::HipRollComp)),
+            (4, Some(0.09))
+        );
+        walks_at_pace_within_the_stops(&expert, 30, physics);
+        let window = within_two_degrees_over(&corners_of_l(&exp, true), physics);
+        let optim1 = found_in(
+            &exp,
+            &[
+                ("ThighRelHip2_Z", -0.07248014550316677),
+                ("ratio_flexion", 0.7337248544360496),
+                ("long_offset_MidAnkles_2_Torso_Init", 0.007568212834695239),
+                ("height_lift", 0.027382255547773543),
+                ("xlength_step_max", 0.10655390587942211),
+            ],
+        );
+        let (_, s, mx, planned) = walks_at_pace_within_the_stops(&optim1, 100, physics);
+        println!("L {window:.2}°; seed 1's Optim.1: s {s}, {mx:.3} m of {planned:.3} m");
+        assert!(s >= 0.9 && mx >= 6.0, "s {s}, {mx} m");
     }
 
     /// Experiment 2 on the arms file at 4 × 5 ms finds a set that walks the
