@@ -841,6 +841,8 @@ expert = -0.04
             "physical-arms-5ms.toml",
             "physical-technical-arms-5ms-roll.toml",
             "physical-arms-5ms-roll.toml",
+            "physical-technical-arms-5ms-roll-aim.toml",
+            "physical-arms-5ms-roll-aim.toml",
         ] {
             let path = format!("{}/../experiments/{f}", env!("CARGO_MANIFEST_DIR"));
             let text = std::fs::read_to_string(&path).unwrap();
@@ -887,7 +889,7 @@ expert = -0.04
             if f.contains("arms") {
                 assert_eq!(e.fixed.get("arm_swing"), Some(&0.4), "{f}");
                 // Only the roll files widen the stance hip's roll.
-                let roll = if f.ends_with("-roll.toml") {
+                let roll = if f.ends_with("-roll.toml") || f.ends_with("-roll-aim.toml") {
                     0.09
                 } else {
                     0.07
