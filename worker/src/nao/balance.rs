@@ -1011,6 +1011,25 @@ mod tests {
         );
     }
 
+    /// `exp`'s expert at pace as planned within 1° of every stop (30 trials),
+    /// L's corners and centre within 2° of theirs, and `optim1`, a set a run
+    /// of `exp` found (every parameter, in the file's order), over the 100
+    /// trials of Table IV at s ≥ 0.9 and ≥ 6.0 m, within 10 % of its plan
+    /// and 1° of every stop.
+    fn keeps_the_stops_and_walks_six_metres(
+        exp: &protocol::Experiment,
+        physics: SimSettings,
+        expert: &ParamValues,
+        optim1: &[(&str, f64)],
+    ) {
+        walks_at_pace_within_the_stops(expert, 30, physics);
+        let window = within_two_degrees_over(&corners_of_l(exp, true), physics);
+        let optim1 = found_in(exp, optim1);
+        let (_, s, mx, planned) = walks_at_pace_within_the_stops(&optim1, 100, physics);
+        println!("L {window:.2}°; Optim.1: s {s}, {mx:.3} m of {planned:.3} m");
+        assert!(s >= 0.9 && mx >= 6.0, "s {s}, {mx} m");
+    }
+
     /// The arms file at 4 × 5 ms with the stance hip's roll at 0.09 rad
     /// (`experiments/physical-technical-arms-5ms-roll.toml`; docs/walk.md,
     /// "The engine's constants at 4 × 5 ms") keeps the stops and finds the
@@ -1030,10 +1049,10 @@ mod tests {
             (physics.substeps, expert.given(Param::HipRollComp)),
             (4, Some(0.09))
         );
-        walks_at_pace_within_the_stops(&expert, 30, physics);
-        let window = within_two_degrees_over(&corners_of_l(&exp, true), physics);
-        let optim1 = found_in(
+        keeps_the_stops_and_walks_six_metres(
             &exp,
+            physics,
+            &expert,
             &[
                 ("ThighRelHip2_Z", -0.07248014550316677),
                 ("ratio_flexion", 0.7337248544360496),
@@ -1042,9 +1061,6 @@ mod tests {
                 ("xlength_step_max", 0.10655390587942211),
             ],
         );
-        let (_, s, mx, planned) = walks_at_pace_within_the_stops(&optim1, 100, physics);
-        println!("L {window:.2}°; seed 1's Optim.1: s {s}, {mx:.3} m of {planned:.3} m");
-        assert!(s >= 0.9 && mx >= 6.0, "s {s}, {mx} m");
     }
 
     /// The roll file with its steps aimed short by the legs' overreach
@@ -1092,10 +1108,10 @@ mod tests {
             "../../../experiments/physical-technical-arms-5ms-roll-aim.toml"
         ));
         assert_eq!(expert.given(Param::StepAim), Some(0.3));
-        walks_at_pace_within_the_stops(&expert, 30, physics);
-        let window = within_two_degrees_over(&corners_of_l(&exp, true), physics);
-        let optim1 = found_in(
+        keeps_the_stops_and_walks_six_metres(
             &exp,
+            physics,
+            &expert,
             &[
                 ("ThighRelHip2_Z", -0.07723586923111701),
                 ("ratio_flexion", 0.7913222324625083),
@@ -1104,9 +1120,6 @@ mod tests {
                 ("xlength_step_max", 0.10772545353299341),
             ],
         );
-        let (_, s, mx, planned) = walks_at_pace_within_the_stops(&optim1, 100, physics);
-        println!("L {window:.2}°; seed 1's Optim.1: s {s}, {mx:.3} m of {planned:.3} m");
-        assert!(s >= 0.9 && mx >= 6.0, "s {s}, {mx} m");
     }
 
     /// Experiment 2 on the arms file at 4 × 5 ms finds a set that walks the
