@@ -889,11 +889,7 @@ expert = -0.04
             if f.contains("arms") {
                 assert_eq!(e.fixed.get("arm_swing"), Some(&0.4), "{f}");
                 // Only the roll files widen the stance hip's roll.
-                let roll = if f.ends_with("-roll.toml") || f.ends_with("-roll-aim.toml") {
-                    0.09
-                } else {
-                    0.07
-                };
+                let roll = if f.contains("-roll") { 0.09 } else { 0.07 };
                 assert_eq!(e.fixed.get("hip_roll_comp"), Some(&roll), "{f}");
                 assert_eq!(e.physics.firm_stop_window_deg, 8.0, "{f}");
                 assert!(e
