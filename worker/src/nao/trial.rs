@@ -70,18 +70,28 @@ impl Engine {
                 .filter(|v| v.is_finite())
                 .ok_or_else(|| format!("`{key}`: `{value}` is not a finite number"))
         };
+        // A constant outside the range the engine is built for is refused by
+        // name, never clamped behind the user's back.
+        let within = |lo: f64, hi: f64| -> Result<f64, String> {
+            let v = num()?;
+            if (lo..=hi).contains(&v) {
+                Ok(v)
+            } else {
+                Err(format!("`{key}`: {value} is outside [{lo}, {hi}]"))
+            }
+        };
         let g = &mut self.gait;
         match key {
-            "period_s" => g.period_s = num()?.clamp(0.05, 2.0),
-            "double_support" => g.double_support = num()?.clamp(0.0, 0.9),
-            "com_above_hip_m" => g.com_above_hip_m = num()?.clamp(-0.1, 0.2),
-            "hip_roll_comp_rad" => g.hip_roll_comp_rad = num()?.clamp(-0.5, 0.5),
-            "start_s" => g.start_s = num()?.clamp(0.0, 5.0),
-            "ramp_steps" => g.ramp_steps = num()?.clamp(0.0, 100.0),
-            "lift_peak" => g.lift_peak = num()?.clamp(0.05, 0.95),
-            "lift_end" => g.lift_end = num()?.clamp(0.1, 1.0),
-            "yaw_pitch_rad" => g.yaw_pitch_rad = num()?.clamp(-0.5, 0.0),
-            "arm_swing_rad" => g.arm_swing_rad = num()?.clamp(-1.0, 1.0),
+            "period_s" => g.period_s = within(0.05, 2.0)?,
+            "double_support" => g.double_support = within(0.0, 0.9)?,
+            "com_above_hip_m" => g.com_above_hip_m = within(-0.1, 0.2)?,
+            "hip_roll_comp_rad" => g.hip_roll_comp_rad = within(-0.5, 0.5)?,
+            "start_s" => g.start_s = within(0.0, 5.0)?,
+            "ramp_steps" => g.ramp_steps = within(0.0, 100.0)?,
+            "lift_peak" => g.lift_peak = within(0.05, 0.95)?,
+            "lift_end" => g.lift_end = within(0.1, 1.0)?,
+            "yaw_pitch_rad" => g.yaw_pitch_rad = within(-0.5, 0.0)?,
+            "arm_swing_rad" => g.arm_swing_rad = within(-1.0, 1.0)?,
             "travel" => {
                 g.travel = match value {
                     "cosine" => super::walk::TravelProfile::Cosine,
@@ -94,11 +104,14 @@ impl Engine {
                 }
             }
             "feedback" if value == "off" => self.feedback = None,
+            "feedback" => return Err(format!("`feedback`: `{value}` is not `off`")),
             _ => {
-                let v = num()?;
-                let f = self.feedback.get_or_insert(super::balance::GAINS);
-                *f.field(key)
-                    .ok_or_else(|| format!("unknown engine constant `{key}`"))? = v;
+                let mut gains = self.feedback.unwrap_or(super::balance::GAINS);
+                let slot = gains
+                    .field(key)
+                    .ok_or_else(|| format!("unknown engine constant `{key}`"))?;
+                *slot = num()?;
+                self.feedback = Some(gains);
             }
         }
         Ok(self)
@@ -616,6 +629,38 @@ const OPEN: Engine = Engine {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `--engine K=V`: a constant in its range is set, one outside it, a
+    /// feedback other than `off`, a non-number and an unknown name are each
+    /// refused by name, never clamped or guessed.
+    #[test]
+    fn engine_constants_out_of_range_or_unknown_are_refused_by_name() {
+        let closed = Engine::of(WalkEngine::ClosedLoop);
+        let set = closed.with("period_s", "0.2").expect("in range");
+        assert_eq!(set.gait.period_s, 0.2);
+        for (k, v, says) in [
+            ("period_s", "10", "`period_s`: 10 is outside [0.05, 2]"),
+            (
+                "yaw_pitch_rad",
+                "0.01",
+                "`yaw_pitch_rad`: 0.01 is outside [-0.5, 0]",
+            ),
+            ("feedback", "maybe", "`feedback`: `maybe` is not `off`"),
+            (
+                "hip_pitch",
+                "NaN",
+                "`hip_pitch`: `NaN` is not a finite number",
+            ),
+            ("no_such", "1", "unknown engine constant `no_such`"),
+            ("no_such", "x", "unknown engine constant `no_such`"),
+        ] {
+            assert_eq!(closed.with(k, v).err().as_deref(), Some(says), "{k}={v}");
+        }
+        let open = Engine::of(WalkEngine::OpenLoop);
+        let gained = open.with("hip_pitch", "-1").expect("a gain");
+        assert_eq!(gained.feedback.map(|f| f.hip_pitch), Some(-1.0));
+        assert_eq!(open.with("feedback", "off").expect("off").feedback, None);
+    }
 
     /// Done-when of the walk: over 100 trials the expert set walks (s ≥ 0.7,
     /// mx ≥ 1.5 m in 10 s, my/mx < 0.25) with a spread (ex > 0).
