@@ -8,6 +8,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
+use crate::params::Shown;
 use crate::{keys, params};
 
 /// Why an experiment file was refused.
@@ -350,15 +351,18 @@ impl Physics {
         }
         let a = self.armature_kg_m2;
         if !(a.is_finite() && (0.0..=0.1).contains(&a)) {
-            return Err(("armature_kg_m2", format!("{a} is not in [0, 0.1]")));
+            return Err(("armature_kg_m2", format!("{} is not in [0, 0.1]", Shown(a))));
         }
         let c = self.contact_hz;
         if !(c.is_finite() && (10.0..=10_000.0).contains(&c)) {
-            return Err(("contact_hz", format!("{c} is not in [10, 10000]")));
+            return Err(("contact_hz", format!("{} is not in [10, 10000]", Shown(c))));
         }
         let w = self.firm_stop_window_deg;
         if !(w.is_finite() && (1.0..=20.0).contains(&w)) {
-            return Err(("firm_stop_window_deg", format!("{w} is not in [1, 20]")));
+            return Err((
+                "firm_stop_window_deg",
+                format!("{} is not in [1, 20]", Shown(w)),
+            ));
         }
         Ok(())
     }
@@ -480,14 +484,18 @@ impl Experiment {
             if p.lower >= p.upper {
                 return Err(invalid(
                     f("lower"),
-                    format!("lower ({}) must be below upper ({})", p.lower, p.upper),
+                    format!(
+                        "lower ({}) must be below upper ({})",
+                        Shown(p.lower),
+                        Shown(p.upper)
+                    ),
                 ));
             }
             if let Some(x) = p.expert {
                 if !x.is_finite() || x < p.lower || x > p.upper {
                     return Err(invalid(
                         f("expert"),
-                        format!("{x} is outside [{}, {}]", p.lower, p.upper),
+                        format!("{} is outside [{}, {}]", Shown(x), p.lower, p.upper),
                     ));
                 }
             }
@@ -549,7 +557,10 @@ impl Experiment {
             ("pickout.gamma", k.gamma),
         ] {
             if !v.is_finite() || v < 0.0 {
-                return Err(invalid(field, format!("{v} is not a finite number >= 0")));
+                return Err(invalid(
+                    field,
+                    format!("{} is not a finite number >= 0", Shown(v)),
+                ));
             }
         }
         if k.success_rate > 1.0 {
@@ -558,7 +569,11 @@ impl Experiment {
         if k.beta >= k.alpha {
             return Err(invalid(
                 "pickout.beta",
-                format!("beta ({}) must be below alpha ({})", k.beta, k.alpha),
+                format!(
+                    "beta ({}) must be below alpha ({})",
+                    Shown(k.beta),
+                    Shown(k.alpha)
+                ),
             ));
         }
         for (field, v) in [
@@ -568,7 +583,7 @@ impl Experiment {
             ("pickout.gamma", k.gamma),
         ] {
             if v > 1000.0 {
-                return Err(invalid(field, format!("{v} is above 1000")));
+                return Err(invalid(field, format!("{} is above 1000", Shown(v))));
             }
         }
         let c = &self.clop;
@@ -580,7 +595,7 @@ impl Experiment {
             ("clop.prior_strength", c.prior_strength, 1e6),
         ] {
             if !v.is_finite() || v < 0.0 || v > hi {
-                return Err(invalid(field, format!("{v} is not in [0, {hi}]")));
+                return Err(invalid(field, format!("{} is not in [0, {hi}]", Shown(v))));
             }
         }
         if c.max_weight_iterations > 100 {
@@ -639,8 +654,11 @@ impl Experiment {
         for (p, v) in self.parameter.iter().zip(values) {
             if !v.is_finite() || *v < p.lower || *v > p.upper {
                 return Err(format!(
-                    "`{}` = {v} is outside [{}, {}]",
-                    p.name, p.lower, p.upper
+                    "`{}` = {} is outside [{}, {}]",
+                    p.name,
+                    Shown(*v),
+                    p.lower,
+                    p.upper
                 ));
             }
         }
@@ -652,7 +670,10 @@ fn finite_positive(field: &str, v: f64) -> Result<(), ExperimentError> {
     if v.is_finite() && v > 0.0 {
         Ok(())
     } else {
-        Err(invalid(field, format!("{v} is not a finite number > 0")))
+        Err(invalid(
+            field,
+            format!("{} is not a finite number > 0", Shown(v)),
+        ))
     }
 }
 

@@ -306,6 +306,23 @@ pub fn find(name: &str) -> Option<&'static KnownParam> {
     KNOWN.iter().find(|p| p.name == name)
 }
 
+/// A number as an error message shows it: as Rust writes it, except that
+/// one of ten million or more, or below a hundred-thousandth, is written
+/// with an exponent (`1e300`, not 301 digits).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Shown(pub f64);
+
+impl std::fmt::Display for Shown {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let a = self.0.abs();
+        if a.is_finite() && a != 0.0 && !(1e-5..1e7).contains(&a) {
+            write!(f, "{:e}", self.0)
+        } else {
+            write!(f, "{}", self.0)
+        }
+    }
+}
+
 /// Why a named value was refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ParamError {
@@ -321,7 +338,7 @@ pub enum ParamError {
         value: f64,
     },
     /// Outside the admissible range.
-    #[error("parameter `{name}` = {value} is outside its admissible range [{min}, {max}] {unit}")]
+    #[error("parameter `{name}` = {} is outside its admissible range [{min}, {max}] {unit}", Shown(*.value))]
     Range {
         /// The parameter.
         name: &'static str,
@@ -484,5 +501,22 @@ mod tests {
         assert!(check_value("height_lift", 1.0)
             .unwrap_err()
             .contains("[0, 0.12]"));
+    }
+
+    /// An absurd number is named in a line, not spelt out digit by digit.
+    #[test]
+    fn errors_write_absurd_numbers_with_an_exponent() {
+        assert_eq!(
+            check_value("height_lift", 1e300).unwrap_err(),
+            "parameter `height_lift` = 1e300 is outside its admissible range [0, 0.12] m"
+        );
+        let shown = |v: f64| Shown(v).to_string();
+        assert_eq!(shown(-2.5e-9), "-2.5e-9");
+        assert_eq!(shown(12_345_678.0), "1.2345678e7");
+        assert_eq!(shown(0.042), "0.042");
+        assert_eq!(shown(-9_999_999.0), "-9999999");
+        assert_eq!(shown(0.0), "0");
+        assert_eq!(shown(f64::NAN), "NaN");
+        assert_eq!(shown(f64::NEG_INFINITY), "-inf");
     }
 }

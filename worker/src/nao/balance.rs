@@ -1567,12 +1567,144 @@ mod tests {
         }
     }
 
+    /// The band file's experiment 2 optimum (session 28, seed 1, iteration 494).
+    const BAND_OPTIM: [(&str, f64); 6] = [
+        ("ThighRelHip2_Z", -0.07857499297181415),
+        ("ratio_flexion", 0.7741895793878497),
+        ("long_offset_MidAnkles_2_Torso_Init", 0.0038717354567943843),
+        ("height_lift", 0.034488529928708454),
+        ("xlength_step_max", 0.11309929787598152),
+        ("step_period", 0.13837635796158732),
+    ];
+
+    /// The reach file's experiment 2 Optim.2 (session 29, seed 1).
+    const REACH_OPTIM2: [(&str, f64); 6] = [
+        ("ThighRelHip2_Z", -0.07706498953106387),
+        ("ratio_flexion", 0.7398127868480532),
+        ("long_offset_MidAnkles_2_Torso_Init", 0.01233662393993597),
+        ("height_lift", 0.042057196189412276),
+        ("xlength_step_max", 0.11405149474763805),
+        ("step_period", 0.1314131670876751),
+    ];
+
+    /// The reach-aim file's experiment 2 Optim.1 (seed 1).
+    const AIM_OPTIM1: [(&str, f64); 6] = [
+        ("ThighRelHip2_Z", -0.0789056136060395),
+        ("ratio_flexion", 0.7352045984338313),
+        ("long_offset_MidAnkles_2_Torso_Init", 0.006757706130347866),
+        ("height_lift", 0.0376129487842171),
+        ("xlength_step_max", 0.10411027188597062),
+        ("step_period", 0.12474491549712542),
+    ];
+
+    /// The wider reach file's experiment 2 Optim.1 (session 32, seed 1).
+    const REACH11_OPTIM1: [(&str, f64); 6] = [
+        ("ThighRelHip2_Z", -0.07900423429969812),
+        ("ratio_flexion", 0.717971394503071),
+        ("long_offset_MidAnkles_2_Torso_Init", 0.007978654172390104),
+        ("height_lift", 0.03640426114690867),
+        ("xlength_step_max", 0.08856005054477481),
+        ("step_period", 0.12205118441994006),
+    ];
+
+    /// The band files keep their bits. Their claims (the seven tests below
+    /// marked long: 100-trial samples at 1.25-0.67 ms steps and L's 65 sets,
+    /// about 20 min of CPU in all) run only with `cargo test --workspace --
+    /// --ignored`; this pins the first trials of their samples, each set
+    /// they walk at the step its seed draws, so a change to the engine or
+    /// the vendored rapier that moves a band walk fails here. When a pin
+    /// moves on purpose, run the long claims again before moving it (the
+    /// test prints every pin's seed, drawn steps, x and y). Read off this
+    /// test at 014eb9b, where the long claims passed in clean-clone CI.
+    #[test]
+    fn the_band_files_keep_their_bits() {
+        let band =
+            include_str!("../../../experiments/physical-technical-converged-period-band.toml");
+        let reach = include_str!(
+            "../../../experiments/physical-technical-converged-period-band-reach.toml"
+        );
+        let aim = include_str!(
+            "../../../experiments/physical-technical-converged-period-band-reach-aim.toml"
+        );
+        let reach11 = include_str!(
+            "../../../experiments/physical-technical-converged-period-band-reach11-aim.toml"
+        );
+        // (file, the set if not the expert, seed, drawn steps, x, y)
+        type Pin<'a> = (&'a str, Option<&'a [(&'a str, f64)]>, u64, u32, f64, f64);
+        let pins: [Pin; 7] = [
+            (band, None, 777, 18, 4.402172088623047, 0.31303226947784424),
+            (
+                band,
+                Some(&BAND_OPTIM),
+                778,
+                23,
+                6.534740447998047,
+                0.15793460607528687,
+            ),
+            (
+                reach,
+                Some(&REACH_OPTIM2),
+                779,
+                28,
+                6.286581039428711,
+                0.08406458795070648,
+            ),
+            (aim, None, 780, 24, 3.9125497341156006, -0.35846373438835144),
+            (
+                aim,
+                Some(&AIM_OPTIM1),
+                781,
+                23,
+                6.095880508422852,
+                -0.1282893419265747,
+            ),
+            (
+                reach11,
+                None,
+                782,
+                23,
+                3.8368489742279053,
+                -0.16148316860198975,
+            ),
+            (
+                reach11,
+                Some(&REACH11_OPTIM1),
+                783,
+                16,
+                6.463290691375732,
+                -0.09876402467489243,
+            ),
+        ];
+        // Every pin walked first, so that a failure prints them all.
+        let walked: Vec<_> = pins
+            .iter()
+            .map(|&(file, found, seed, ..)| {
+                let (exp, physics, expert) = shipped(file);
+                let set = found.map_or(expert, |f| found_in(&exp, f));
+                let t = run(0, &set, seed, 10.0, physics, closed()).unwrap();
+                let m = &t.measurement;
+                println!(
+                    "{seed}, {}, {:?}, {:?}, fell {}",
+                    t.substeps, m.x_m, m.y_m, m.fell
+                );
+                t
+            })
+            .collect();
+        for (i, (t, &(.., substeps, x, y))) in walked.iter().zip(&pins).enumerate() {
+            assert_eq!(t.substeps, substeps, "pin {i}");
+            assert!(!t.measurement.fell, "pin {i}");
+            assert_eq!(t.measurement.x_m.to_bits(), x.to_bits(), "pin {i}");
+            assert_eq!(t.measurement.y_m.to_bits(), y.to_bits(), "pin {i}");
+        }
+    }
+
     /// On the band of steps the expert walks the pace issue's 4.0 m at the
     /// band file's step period of 0.17 s: 100 trials from seed 777, each at
     /// its drawn step from 1.25 to 0.67 ms, s ≥ 0.7, straight, within 10 %
     /// of its plan and 1° of every stop; L's 64 corners and centre within
     /// 2°. At the other step-period files' 0.18 s it walks 3.96 m there.
     #[test]
+    #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored`)"]
     fn the_band_expert_walks_four_metres_within_its_stops() {
         let (exp, physics, expert) = shipped(include_str!(
             "../../../experiments/physical-technical-converged-period-band.toml"
@@ -1608,6 +1740,7 @@ mod tests {
     /// 1° of every stop, and L's 64 corners and centre, each walked with
     /// the cap and the aim, stay within 2° of their stops.
     #[test]
+    #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored`)"]
     fn the_reach_aim_file_keeps_the_expert_and_l_within_their_stops() {
         let (exp, physics, expert) = shipped(include_str!(
             "../../../experiments/physical-technical-converged-period-band-reach-aim.toml"
@@ -1622,6 +1755,7 @@ mod tests {
     /// longer, stay within 2° of their stops, and the expert (whose step the
     /// cap does not shorten) within 1°.
     #[test]
+    #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored`)"]
     fn the_wider_reach_file_keeps_the_expert_and_l_within_their_stops() {
         let (exp, physics, expert) = shipped(include_str!(
             "../../../experiments/physical-technical-converged-period-band-reach11-aim.toml"
@@ -1640,18 +1774,12 @@ mod tests {
     /// with 0.090 m steps the same set walks further and within 10 % of its
     /// plan (measured: 6.195 m of 6.043 m planned, 20 trials).
     #[test]
+    #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored`)"]
     fn the_band_runs_optimum_walks_six_metres_but_steps_short_of_its_plan() {
         let (exp, physics, _) = shipped(include_str!(
             "../../../experiments/physical-technical-converged-period-band.toml"
         ));
-        let found = [
-            ("ThighRelHip2_Z", -0.07857499297181415),
-            ("ratio_flexion", 0.7741895793878497),
-            ("long_offset_MidAnkles_2_Torso_Init", 0.0038717354567943843),
-            ("height_lift", 0.034488529928708454),
-            ("xlength_step_max", 0.11309929787598152),
-            ("step_period", 0.13837635796158732),
-        ];
+        let found = BAND_OPTIM;
         let optim = found_in(&exp, &found);
         let (s, mx, my) = summary(&from_777(&optim, 100, physics));
         let planned = trial::planned_travel_m(0, &optim, 10.0, closed()).unwrap();
@@ -1676,6 +1804,7 @@ mod tests {
     /// Optim.1 1.11 × (just outside it), where the uncapped band run's
     /// optimum walked 0.80 ×.
     #[test]
+    #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored`)"]
     fn the_reach_runs_optima_walk_six_metres_by_about_their_plan() {
         let (exp, physics, _) = shipped(include_str!(
             "../../../experiments/physical-technical-converged-period-band-reach.toml"
@@ -1691,17 +1820,7 @@ mod tests {
                 ("step_period", 0.13522526092746529),
             ],
         );
-        let optim2 = found_in(
-            &exp,
-            &[
-                ("ThighRelHip2_Z", -0.07706498953106387),
-                ("ratio_flexion", 0.7398127868480532),
-                ("long_offset_MidAnkles_2_Torso_Init", 0.01233662393993597),
-                ("height_lift", 0.042057196189412276),
-                ("xlength_step_max", 0.11405149474763805),
-                ("step_period", 0.1314131670876751),
-            ],
-        );
+        let optim2 = found_in(&exp, &REACH_OPTIM2);
         for optim in [&optim1, &optim2] {
             let step = trial::planned_step_m(0, optim, closed()).unwrap();
             assert!(step < optim.walk().step_length - 0.02, "{step}");
@@ -1734,21 +1853,12 @@ mod tests {
     /// `step_aim` 0 the same body walks further beyond its plan (measured,
     /// 20 trials: 6.257 m, 1.12 ×, against 6.119 m, 1.10 ×).
     #[test]
+    #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored`)"]
     fn the_aim_runs_optima_walk_six_metres_within_a_tenth_of_their_plan() {
         let (exp, physics, _) = shipped(include_str!(
             "../../../experiments/physical-technical-converged-period-band-reach-aim.toml"
         ));
-        let optim1 = found_in(
-            &exp,
-            &[
-                ("ThighRelHip2_Z", -0.0789056136060395),
-                ("ratio_flexion", 0.7352045984338313),
-                ("long_offset_MidAnkles_2_Torso_Init", 0.006757706130347866),
-                ("height_lift", 0.0376129487842171),
-                ("xlength_step_max", 0.10411027188597062),
-                ("step_period", 0.12474491549712542),
-            ],
-        );
+        let optim1 = found_in(&exp, &AIM_OPTIM1);
         let optim2 = found_in(
             &exp,
             &[
@@ -1786,21 +1896,12 @@ mod tests {
     /// (measured, 100 trials from 777: 6.316 m of 6.006 m planned, 1.05 ×,
     /// and 6.088 m of 6.134 m, 0.99 ×; s 1.00).
     #[test]
+    #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored`)"]
     fn the_wider_reach_runs_optima_walk_six_metres_on_a_six_metre_plan() {
         let (exp, physics, _) = shipped(include_str!(
             "../../../experiments/physical-technical-converged-period-band-reach11-aim.toml"
         ));
-        let optim1 = found_in(
-            &exp,
-            &[
-                ("ThighRelHip2_Z", -0.07900423429969812),
-                ("ratio_flexion", 0.717971394503071),
-                ("long_offset_MidAnkles_2_Torso_Init", 0.007978654172390104),
-                ("height_lift", 0.03640426114690867),
-                ("xlength_step_max", 0.08856005054477481),
-                ("step_period", 0.12205118441994006),
-            ],
-        );
+        let optim1 = found_in(&exp, &REACH11_OPTIM1);
         let optim2 = found_in(
             &exp,
             &[

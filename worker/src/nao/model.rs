@@ -114,7 +114,7 @@ pub enum ModelError {
     #[error("robot type {0} does not exist (0..=4)")]
     Type(u8),
     /// A morphology quantity outside its range.
-    #[error("{name} = {value} is outside its admissible range [{lo}, {hi}] m")]
+    #[error("{name} = {} is outside its admissible range [{lo}, {hi}] m", protocol::params::Shown(*.value))]
     Range {
         /// Parameter.
         name: String,
