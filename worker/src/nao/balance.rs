@@ -1610,7 +1610,7 @@ mod tests {
     /// The band files keep their bits. Their claims (the seven tests below
     /// marked long: 100-trial samples at 1.25-0.67 ms steps and L's 65 sets,
     /// about 20 min of CPU in all) run only with `cargo test --workspace --
-    /// --ignored`; this pins the first trials of their samples, each set
+    /// --ignored nao::balance`; this pins trials of their samples, each set
     /// they walk at the step its seed draws, so a change to the engine or
     /// the vendored rapier that moves a band walk fails here. When a pin
     /// moves on purpose, run the long claims again before moving it (the
@@ -1704,7 +1704,7 @@ mod tests {
     /// of its plan and 1° of every stop; L's 64 corners and centre within
     /// 2°. At the other step-period files' 0.18 s it walks 3.96 m there.
     #[test]
-    #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored`)"]
+    #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_band_expert_walks_four_metres_within_its_stops() {
         let (exp, physics, expert) = shipped(include_str!(
             "../../../experiments/physical-technical-converged-period-band.toml"
@@ -1740,7 +1740,7 @@ mod tests {
     /// 1° of every stop, and L's 64 corners and centre, each walked with
     /// the cap and the aim, stay within 2° of their stops.
     #[test]
-    #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored`)"]
+    #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_reach_aim_file_keeps_the_expert_and_l_within_their_stops() {
         let (exp, physics, expert) = shipped(include_str!(
             "../../../experiments/physical-technical-converged-period-band-reach-aim.toml"
@@ -1755,7 +1755,7 @@ mod tests {
     /// longer, stay within 2° of their stops, and the expert (whose step the
     /// cap does not shorten) within 1°.
     #[test]
-    #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored`)"]
+    #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_wider_reach_file_keeps_the_expert_and_l_within_their_stops() {
         let (exp, physics, expert) = shipped(include_str!(
             "../../../experiments/physical-technical-converged-period-band-reach11-aim.toml"
@@ -1774,7 +1774,7 @@ mod tests {
     /// with 0.090 m steps the same set walks further and within 10 % of its
     /// plan (measured: 6.195 m of 6.043 m planned, 20 trials).
     #[test]
-    #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored`)"]
+    #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_band_runs_optimum_walks_six_metres_but_steps_short_of_its_plan() {
         let (exp, physics, _) = shipped(include_str!(
             "../../../experiments/physical-technical-converged-period-band.toml"
@@ -1804,7 +1804,7 @@ mod tests {
     /// Optim.1 1.11 × (just outside it), where the uncapped band run's
     /// optimum walked 0.80 ×.
     #[test]
-    #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored`)"]
+    #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_reach_runs_optima_walk_six_metres_by_about_their_plan() {
         let (exp, physics, _) = shipped(include_str!(
             "../../../experiments/physical-technical-converged-period-band-reach.toml"
@@ -1853,7 +1853,7 @@ mod tests {
     /// `step_aim` 0 the same body walks further beyond its plan (measured,
     /// 20 trials: 6.257 m, 1.12 ×, against 6.119 m, 1.10 ×).
     #[test]
-    #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored`)"]
+    #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_aim_runs_optima_walk_six_metres_within_a_tenth_of_their_plan() {
         let (exp, physics, _) = shipped(include_str!(
             "../../../experiments/physical-technical-converged-period-band-reach-aim.toml"
@@ -1896,7 +1896,7 @@ mod tests {
     /// (measured, 100 trials from 777: 6.316 m of 6.006 m planned, 1.05 ×,
     /// and 6.088 m of 6.134 m, 0.99 ×; s 1.00).
     #[test]
-    #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored`)"]
+    #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_wider_reach_runs_optima_walk_six_metres_on_a_six_metre_plan() {
         let (exp, physics, _) = shipped(include_str!(
             "../../../experiments/physical-technical-converged-period-band-reach11-aim.toml"
