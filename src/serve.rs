@@ -9,7 +9,7 @@ use coordinator::{
     run::{load_history, Run},
     service::{self, Ended, Event, ServiceConfig},
 };
-use protocol::{experiment::TrialModel, wire::RunStatus};
+use protocol::{experiment::TrialModel, params::Shown, wire::RunStatus};
 
 use crate::{
     args::JobArgs,
@@ -73,13 +73,13 @@ pub fn open_run(job: &JobArgs) -> Result<(Run, Vec<coordinator::run::Effect>), F
     if !(job.silence_s.is_finite() && (0.1..=3600.0).contains(&job.silence_s)) {
         return Err(Failure::Usage(anyhow!(
             "--silence-s {}: must be in [0.1, 3600] seconds",
-            job.silence_s
+            Shown(job.silence_s)
         )));
     }
     if !(job.lease_s.is_finite() && (1.0..=86_400.0).contains(&job.lease_s)) {
         return Err(Failure::Usage(anyhow!(
             "--lease-s {}: must be in [1, 86400] seconds",
-            job.lease_s
+            Shown(job.lease_s)
         )));
     }
     let imported = match &job.from {

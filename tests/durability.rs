@@ -262,6 +262,17 @@ fn absurd_numbers_are_usage_errors_never_panics() {
         );
         assert!(!dir.join("r").join("journal.nfj").exists());
     }
+    // An absurd number is named in a line, not spelt out in 301 digits.
+    let err = fails(
+        naofarm()
+            .arg("run")
+            .arg(synthetic())
+            .arg("--out")
+            .arg(dir.join("r"))
+            .args(["--lease-s", "1e300"]),
+        2,
+    );
+    assert!(err.contains("--lease-s 1e300: must be in"), "{err}");
     for value in ["1e20", "0", "nan"] {
         fails(naofarm().args(["watch", "x", "--timeout-s", value]), 2);
     }

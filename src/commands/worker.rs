@@ -3,6 +3,7 @@
 use std::time::Duration;
 
 use anyhow::anyhow;
+use protocol::params::Shown;
 
 use crate::{
     args::{NetArgs, WorkerLimits},
@@ -27,7 +28,7 @@ pub fn worker(
     if !(limits.max_duration_s.is_finite() && limits.max_duration_s > 0.0) {
         return Err(Failure::Usage(anyhow!(
             "--max-duration-s {}: must be a positive number of seconds",
-            limits.max_duration_s
+            Shown(limits.max_duration_s)
         )));
     }
     let models = limits

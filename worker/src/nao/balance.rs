@@ -1779,8 +1779,7 @@ mod tests {
         let (exp, physics, _) = shipped(include_str!(
             "../../../experiments/physical-technical-converged-period-band.toml"
         ));
-        let found = BAND_OPTIM;
-        let optim = found_in(&exp, &found);
+        let optim = found_in(&exp, &BAND_OPTIM);
         let (s, mx, my) = summary(&from_777(&optim, 100, physics));
         let planned = trial::planned_travel_m(0, &optim, 10.0, closed()).unwrap();
         println!("s {s}, {mx:.3} m of {planned:.3} m planned");
