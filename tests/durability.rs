@@ -238,6 +238,7 @@ fn absurd_numbers_are_usage_errors_never_panics() {
     let dir = scratch("numbers");
     for (flag, value) in [
         ("--lease-s", "1e20"),
+        ("--lease-s", "1e300"),
         ("--lease-s", "1e-9"),
         ("--lease-s", "nan"),
         ("--lease-s", "-0"),
@@ -261,18 +262,11 @@ fn absurd_numbers_are_usage_errors_never_panics() {
             "{flag} {value}: {err}"
         );
         assert!(!dir.join("r").join("journal.nfj").exists());
+        if value == "1e300" && flag == "--lease-s" {
+            // named in a line, not spelt out in 301 digits
+            assert!(err.contains("--lease-s 1e300: must be in"), "{err}");
+        }
     }
-    // An absurd number is named in a line, not spelt out in 301 digits.
-    let err = fails(
-        naofarm()
-            .arg("run")
-            .arg(synthetic())
-            .arg("--out")
-            .arg(dir.join("r"))
-            .args(["--lease-s", "1e300"]),
-        2,
-    );
-    assert!(err.contains("--lease-s 1e300: must be in"), "{err}");
     for value in ["1e20", "0", "nan"] {
         fails(naofarm().args(["watch", "x", "--timeout-s", value]), 2);
     }
