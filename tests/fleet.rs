@@ -819,6 +819,12 @@ fn run_over_tls_lets_each_role_do_only_its_part() {
         .unwrap()
         .trim_end_matches(';')
         .to_string();
+    // The hint names the run and the flags a watcher needs, ready to paste.
+    let hint = format!(
+        "`naofarm watch direct --connect {ep} --tls {}`",
+        pki.display()
+    );
+    assert!(line.contains(&hint), "{line}");
     // The watcher's certificate reads the run's status (its local workers,
     // over TLS through the coordinator's own access control, make progress).
     let deadline = Instant::now() + TIMEOUT;

@@ -70,7 +70,8 @@ pub fn run(
             .as_ref()
             .map(|d| format!(" --tls {}", d.display()))
             .unwrap_or_default();
-        eprintln!("zenoh on {endpoint}; watch from another terminal with `naofarm watch RUN --connect {endpoint}{tls_flag}`");
+        let name = &run.evolve().experiment().name;
+        eprintln!("zenoh on {endpoint}; watch from another terminal with `naofarm watch {name} --connect {endpoint}{tls_flag}`");
         let worker_net = NetArgs {
             connect: vec![endpoint],
             listen: vec![],
