@@ -117,7 +117,7 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             .ok_or_else(|| Failure::Usage(anyhow!("--engine `{kv}`: expected KEY=VALUE")))?;
         engine = engine
             .with(k, v)
-            .map_err(|m| Failure::Usage(anyhow!("--engine {m}")))?;
+            .map_err(|m| Failure::Usage(anyhow!("--engine: {m}")))?;
     }
     let first = Replayed {
         robot_type,

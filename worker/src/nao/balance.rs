@@ -128,7 +128,28 @@ impl Gains {
         }
     }
 
-    /// A gain by its field name.
+    /// The field names [`Gains::field`] knows, each with the registry
+    /// parameter it is also given by, where it is one.
+    pub const FIELDS: [(&'static str, Option<Param>); 7] = [
+        ("ankle_pitch", Some(Param::AnklePitchGain)),
+        ("ankle_pitch_rate", None),
+        ("hip_pitch", Some(Param::HipPitchGain)),
+        ("hip_roll", None),
+        ("hip_roll_rate", None),
+        ("turn_place", Some(Param::TurnPlace)),
+        ("step_aim", Some(Param::StepAim)),
+    ];
+
+    /// The range a gain may be set in (`naofarm trial --engine`): its
+    /// parameter's admissible range, or, for a gain that is no parameter,
+    /// [`OTHER_GAIN_RANGE`]. None for a name [`Gains::FIELDS`] lacks.
+    #[must_use]
+    pub fn range(name: &str) -> Option<(f64, f64)> {
+        let (_, param) = Self::FIELDS.iter().find(|(n, _)| *n == name)?;
+        Some(param.map_or(OTHER_GAIN_RANGE, |p| (p.spec().min, p.spec().max)))
+    }
+
+    /// A gain by its field name (one of [`Gains::FIELDS`]).
     pub fn field(&mut self, name: &str) -> Option<&mut f64> {
         Some(match name {
             "ankle_pitch" => &mut self.ankle_pitch,
@@ -142,6 +163,11 @@ impl Gains {
         })
     }
 }
+
+/// The range of the gains that are no parameter (rad per rad, rad per
+/// rad/s): that of the pitch gains that are (`hip_pitch_gain`,
+/// `ankle_pitch_gain`). Every gain measured is well inside it.
+pub const OTHER_GAIN_RANGE: (f64, f64) = (-5.0, 5.0);
 
 /// The closed-loop walk's gains.
 pub const GAINS: Gains = Gains {

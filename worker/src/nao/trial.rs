@@ -58,6 +58,22 @@ impl Engine {
             .map_or("custom", |(n, _)| n)
     }
 
+    /// The names [`Engine::with`] sets besides the gains ([`Gains::FIELDS`]).
+    pub const CONSTANTS: [&'static str; 12] = [
+        "period_s",
+        "double_support",
+        "com_above_hip_m",
+        "hip_roll_comp_rad",
+        "start_s",
+        "ramp_steps",
+        "lift_peak",
+        "lift_end",
+        "yaw_pitch_rad",
+        "arm_swing_rad",
+        "travel",
+        "feedback",
+    ];
+
     /// This engine with one constant set by name (`naofarm trial --engine`,
     /// which measures the engine's constants): a [`GaitConfig`] field, a
     /// [`Gains`] field (which switches feedback on), `travel` = `cosine` or
@@ -106,11 +122,18 @@ impl Engine {
             "feedback" if value == "off" => self.feedback = None,
             "feedback" => return Err(format!("`feedback`: `{value}` is not `off`")),
             _ => {
+                let unknown = || {
+                    let gains = Gains::FIELDS.map(|(name, _)| name);
+                    format!(
+                        "unknown engine constant `{key}` (known: {}, {})",
+                        Self::CONSTANTS.join(", "),
+                        gains.join(", ")
+                    )
+                };
+                let (lo, hi) = Gains::range(key).ok_or_else(unknown)?;
+                let v = within(lo, hi)?;
                 let mut gains = self.feedback.unwrap_or(super::balance::GAINS);
-                let slot = gains
-                    .field(key)
-                    .ok_or_else(|| format!("unknown engine constant `{key}`"))?;
-                *slot = num()?;
+                *gains.field(key).ok_or_else(unknown)? = v;
                 self.feedback = Some(gains);
             }
         }
@@ -651,11 +674,34 @@ mod tests {
                 "NaN",
                 "`hip_pitch`: `NaN` is not a finite number",
             ),
-            ("no_such", "1", "unknown engine constant `no_such`"),
-            ("no_such", "x", "unknown engine constant `no_such`"),
+            // A gain that is a parameter too takes its registry range...
+            ("step_aim", "1.5", "`step_aim`: 1.5 is outside [0, 1]"),
+            // ...one that is not, the pitch gains' range.
+            (
+                "hip_roll_rate",
+                "-6",
+                "`hip_roll_rate`: -6 is outside [-5, 5]",
+            ),
+            ("no_such", "1", "unknown engine constant `no_such` (known: "),
+            ("no_such", "x", "unknown engine constant `no_such` (known: "),
         ] {
-            assert_eq!(closed.with(k, v).err().as_deref(), Some(says), "{k}={v}");
+            let err = closed.with(k, v).err().unwrap_or_default();
+            assert!(err.starts_with(says), "{k}={v}: {err}");
         }
+        // The unknown name's error lists every name, and every name listed
+        // is known: a value out of any range is refused by its name instead.
+        let unknown = closed.with("no_such", "1").err().unwrap_or_default();
+        let gains = Gains::FIELDS.map(|(name, _)| name);
+        for name in Engine::CONSTANTS.iter().chain(&gains) {
+            assert!(
+                unknown.contains(&format!(" {name},")) || unknown.ends_with(&format!(" {name})")),
+                "{name}: {unknown}"
+            );
+            let err = closed.with(name, "1e9").err().unwrap_or_default();
+            assert!(err.starts_with(&format!("`{name}`: ")), "{name}: {err}");
+        }
+        let rated = closed.with("hip_roll_rate", "0.5").expect("in range");
+        assert_eq!(rated.feedback.map(|f| f.hip_roll_rate), Some(0.5));
         let open = Engine::of(WalkEngine::OpenLoop);
         let gained = open.with("hip_pitch", "-1").expect("a gain");
         assert_eq!(gained.feedback.map(|f| f.hip_pitch), Some(-1.0));
