@@ -128,41 +128,24 @@ impl Gains {
         }
     }
 
-    /// The field names [`Gains::field`] knows, each with the registry
-    /// parameter it is also given by, where it is one.
-    pub const FIELDS: [(&'static str, Option<Param>); 7] = [
-        ("ankle_pitch", Some(Param::AnklePitchGain)),
-        ("ankle_pitch_rate", None),
-        ("hip_pitch", Some(Param::HipPitchGain)),
-        ("hip_roll", None),
-        ("hip_roll_rate", None),
-        ("turn_place", Some(Param::TurnPlace)),
-        ("step_aim", Some(Param::StepAim)),
+    /// Each gain by its field name: the registry parameter it is also given
+    /// by, where it is one (its range is then the parameter's; the others'
+    /// is [`OTHER_GAIN_RANGE`]), and the field.
+    pub const FIELDS: [GainField; 7] = [
+        ("ankle_pitch", Some(Param::AnklePitchGain), |g| {
+            &mut g.ankle_pitch
+        }),
+        ("ankle_pitch_rate", None, |g| &mut g.ankle_pitch_rate),
+        ("hip_pitch", Some(Param::HipPitchGain), |g| &mut g.hip_pitch),
+        ("hip_roll", None, |g| &mut g.hip_roll),
+        ("hip_roll_rate", None, |g| &mut g.hip_roll_rate),
+        ("turn_place", Some(Param::TurnPlace), |g| &mut g.turn_place),
+        ("step_aim", Some(Param::StepAim), |g| &mut g.step_aim),
     ];
-
-    /// The range a gain may be set in (`naofarm trial --engine`): its
-    /// parameter's admissible range, or, for a gain that is no parameter,
-    /// [`OTHER_GAIN_RANGE`]. None for a name [`Gains::FIELDS`] lacks.
-    #[must_use]
-    pub fn range(name: &str) -> Option<(f64, f64)> {
-        let (_, param) = Self::FIELDS.iter().find(|(n, _)| *n == name)?;
-        Some(param.map_or(OTHER_GAIN_RANGE, |p| (p.spec().min, p.spec().max)))
-    }
-
-    /// A gain by its field name (one of [`Gains::FIELDS`]).
-    pub fn field(&mut self, name: &str) -> Option<&mut f64> {
-        Some(match name {
-            "ankle_pitch" => &mut self.ankle_pitch,
-            "ankle_pitch_rate" => &mut self.ankle_pitch_rate,
-            "hip_pitch" => &mut self.hip_pitch,
-            "hip_roll" => &mut self.hip_roll,
-            "hip_roll_rate" => &mut self.hip_roll_rate,
-            "turn_place" => &mut self.turn_place,
-            "step_aim" => &mut self.step_aim,
-            _ => return None,
-        })
-    }
 }
+
+/// A gain of [`Gains::FIELDS`]: its name, its parameter, its field.
+pub type GainField = (&'static str, Option<Param>, fn(&mut Gains) -> &mut f64);
 
 /// The range of the gains that are no parameter (rad per rad, rad per
 /// rad/s): that of the pitch gains that are (`hip_pitch_gain`,

@@ -15,7 +15,7 @@ use protocol::measurement::Measurement;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::balance::{Balance, Gains, StepGauge};
+use super::balance::{Balance, Gains, StepGauge, OTHER_GAIN_RANGE};
 use super::footwork::{ahead, Footwork, Tracker};
 use super::model::{ModelError, NaoModel};
 use super::sim::{fallen, standing_angles, Perception, Sim, SimError, SimSettings, Start, CYCLE_S};
@@ -23,6 +23,10 @@ use super::walk::{Gait, GaitConfig, Paced, WalkParams};
 use crate::noise::gauss;
 use protocol::params::ParamValues;
 pub use protocol::WalkEngine;
+
+/// A plan constant [`Engine::with`] sets: its name, the range the engine is
+/// built for, and how it is set.
+pub type PlanConstant = (&'static str, (f64, f64), fn(&mut GaitConfig, f64));
 
 /// A walk engine's plan constants and, closed loop, its feedback gains.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -58,21 +62,31 @@ impl Engine {
             .map_or("custom", |(n, _)| n)
     }
 
-    /// The names [`Engine::with`] sets besides the gains ([`Gains::FIELDS`]).
-    pub const CONSTANTS: [&'static str; 12] = [
-        "period_s",
-        "double_support",
-        "com_above_hip_m",
-        "hip_roll_comp_rad",
-        "start_s",
-        "ramp_steps",
-        "lift_peak",
-        "lift_end",
-        "yaw_pitch_rad",
-        "arm_swing_rad",
-        "travel",
-        "feedback",
+    /// The plan's numeric constants [`Engine::with`] sets: each name, the
+    /// range the engine is built for, and the [`GaitConfig`] field.
+    pub const PLAN: [PlanConstant; 10] = [
+        ("period_s", (0.05, 2.0), |g, v| g.period_s = v),
+        ("double_support", (0.0, 0.9), |g, v| g.double_support = v),
+        ("com_above_hip_m", (-0.1, 0.2), |g, v| g.com_above_hip_m = v),
+        ("hip_roll_comp_rad", (-0.5, 0.5), |g, v| {
+            g.hip_roll_comp_rad = v
+        }),
+        ("start_s", (0.0, 5.0), |g, v| g.start_s = v),
+        ("ramp_steps", (0.0, 100.0), |g, v| g.ramp_steps = v),
+        ("lift_peak", (0.05, 0.95), |g, v| g.lift_peak = v),
+        ("lift_end", (0.1, 1.0), |g, v| g.lift_end = v),
+        ("yaw_pitch_rad", (-0.5, 0.0), |g, v| g.yaw_pitch_rad = v),
+        ("arm_swing_rad", (-1.0, 1.0), |g, v| g.arm_swing_rad = v),
     ];
+
+    /// Every name [`Engine::with`] knows: [`Engine::PLAN`]'s, `travel`,
+    /// `feedback` and the gains ([`Gains::FIELDS`]).
+    #[must_use]
+    pub fn names() -> Vec<&'static str> {
+        let plan = Self::PLAN.iter().map(|(n, ..)| *n);
+        let gains = Gains::FIELDS.iter().map(|(n, ..)| *n);
+        plan.chain(["travel", "feedback"]).chain(gains).collect()
+    }
 
     /// This engine with one constant set by name (`naofarm trial --engine`,
     /// which measures the engine's constants): a [`GaitConfig`] field, a
@@ -96,18 +110,12 @@ impl Engine {
                 Err(format!("`{key}`: {value} is outside [{lo}, {hi}]"))
             }
         };
+        if let Some((_, (lo, hi), set)) = Self::PLAN.iter().find(|(n, ..)| *n == key) {
+            set(&mut self.gait, within(*lo, *hi)?);
+            return Ok(self);
+        }
         let g = &mut self.gait;
         match key {
-            "period_s" => g.period_s = within(0.05, 2.0)?,
-            "double_support" => g.double_support = within(0.0, 0.9)?,
-            "com_above_hip_m" => g.com_above_hip_m = within(-0.1, 0.2)?,
-            "hip_roll_comp_rad" => g.hip_roll_comp_rad = within(-0.5, 0.5)?,
-            "start_s" => g.start_s = within(0.0, 5.0)?,
-            "ramp_steps" => g.ramp_steps = within(0.0, 100.0)?,
-            "lift_peak" => g.lift_peak = within(0.05, 0.95)?,
-            "lift_end" => g.lift_end = within(0.1, 1.0)?,
-            "yaw_pitch_rad" => g.yaw_pitch_rad = within(-0.5, 0.0)?,
-            "arm_swing_rad" => g.arm_swing_rad = within(-1.0, 1.0)?,
             "travel" => {
                 g.travel = match value {
                     "cosine" => super::walk::TravelProfile::Cosine,
@@ -123,17 +131,17 @@ impl Engine {
             "feedback" => return Err(format!("`feedback`: `{value}` is not `off`")),
             _ => {
                 let unknown = || {
-                    let gains = Gains::FIELDS.map(|(name, _)| name);
-                    format!(
-                        "unknown engine constant `{key}` (known: {}, {})",
-                        Self::CONSTANTS.join(", "),
-                        gains.join(", ")
-                    )
+                    let names = Self::names().join(", ");
+                    format!("unknown engine constant `{key}` (known: {names})")
                 };
-                let (lo, hi) = Gains::range(key).ok_or_else(unknown)?;
+                let (_, range, field) = Gains::FIELDS
+                    .iter()
+                    .find(|(n, ..)| *n == key)
+                    .ok_or_else(unknown)?;
+                let (lo, hi) = range.map_or(OTHER_GAIN_RANGE, |p| (p.spec().min, p.spec().max));
                 let v = within(lo, hi)?;
                 let mut gains = self.feedback.unwrap_or(super::balance::GAINS);
-                *gains.field(key).ok_or_else(unknown)? = v;
+                *field(&mut gains) = v;
                 self.feedback = Some(gains);
             }
         }
@@ -691,8 +699,7 @@ mod tests {
         // The unknown name's error lists every name, and every name listed
         // is known: a value out of any range is refused by its name instead.
         let unknown = closed.with("no_such", "1").err().unwrap_or_default();
-        let gains = Gains::FIELDS.map(|(name, _)| name);
-        for name in Engine::CONSTANTS.iter().chain(&gains) {
+        for name in Engine::names() {
             assert!(
                 unknown.contains(&format!(" {name},")) || unknown.ends_with(&format!(" {name})")),
                 "{name}: {unknown}"
