@@ -89,9 +89,10 @@ impl Engine {
     }
 
     /// This engine with one constant set by name (`naofarm trial --engine`,
-    /// which measures the engine's constants): a [`GaitConfig`] field, a
-    /// [`Gains`] field (which switches feedback on), `travel` = `cosine` or
-    /// `trapezoid`, or `feedback` = `off`.
+    /// which measures the engine's constants): a plan constant of
+    /// [`Engine::PLAN`], a gain of [`Gains::FIELDS`] (which switches feedback
+    /// on), `travel` = `cosine` or `trapezoid`, or `feedback` = `off`. A
+    /// value outside its range, or an unknown name, is refused by name.
     pub fn with(mut self, key: &str, value: &str) -> Result<Self, String> {
         let num = || -> Result<f64, String> {
             value
