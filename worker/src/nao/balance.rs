@@ -129,8 +129,8 @@ impl Gains {
     }
 
     /// Each gain by its field name: the registry parameter it is also given
-    /// by, where it is one (its range is then the parameter's; the others'
-    /// is [`OTHER_GAIN_RANGE`]), and the field.
+    /// by, where it is one (which sets its range: [`Gains::range`]), and
+    /// the field.
     pub const FIELDS: [GainField; 7] = [
         ("ankle_pitch", Some(Param::AnklePitchGain), |g| {
             &mut g.ankle_pitch
@@ -142,6 +142,14 @@ impl Gains {
         ("turn_place", Some(Param::TurnPlace), |g| &mut g.turn_place),
         ("step_aim", Some(Param::StepAim), |g| &mut g.step_aim),
     ];
+
+    /// The range a gain of [`Gains::FIELDS`] may be set in, by its
+    /// parameter: the parameter's admissible range, or [`OTHER_GAIN_RANGE`]
+    /// for a gain that is no parameter.
+    #[must_use]
+    pub fn range(param: Option<Param>) -> (f64, f64) {
+        param.map_or(OTHER_GAIN_RANGE, |p| (p.spec().min, p.spec().max))
+    }
 }
 
 /// A gain of [`Gains::FIELDS`]: its name, its parameter, its field.

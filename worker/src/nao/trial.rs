@@ -15,7 +15,7 @@ use protocol::measurement::Measurement;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::balance::{Balance, Gains, StepGauge, OTHER_GAIN_RANGE};
+use super::balance::{Balance, Gains, StepGauge};
 use super::footwork::{ahead, Footwork, Tracker};
 use super::model::{ModelError, NaoModel};
 use super::sim::{fallen, standing_angles, Perception, Sim, SimError, SimSettings, Start, CYCLE_S};
@@ -135,11 +135,11 @@ impl Engine {
                     let names = Self::names().join(", ");
                     format!("unknown engine constant `{key}` (known: {names})")
                 };
-                let (_, range, field) = Gains::FIELDS
+                let (_, param, field) = Gains::FIELDS
                     .iter()
                     .find(|(n, ..)| *n == key)
                     .ok_or_else(unknown)?;
-                let (lo, hi) = range.map_or(OTHER_GAIN_RANGE, |p| (p.spec().min, p.spec().max));
+                let (lo, hi) = Gains::range(*param);
                 let v = within(lo, hi)?;
                 let mut gains = self.feedback.unwrap_or(super::balance::GAINS);
                 *field(&mut gains) = v;
