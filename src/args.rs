@@ -121,8 +121,12 @@ pub enum Command {
         #[arg(long = "param", value_name = "NAME=VALUE")]
         params: Vec<String>,
         /// Machine-readable output.
-        #[arg(long)]
+        #[arg(long, conflicts_with = "simspark")]
         json: bool,
+        /// Print the body as an entry of SimSpark's naorobottypes.rb, to try it
+        /// on the league's server (rcssserver3d).
+        #[arg(long)]
+        simspark: bool,
     },
     /// Hold a standing posture with the servos; report falls and torso height.
     Stand(StandArgs),

@@ -136,6 +136,15 @@ fn dispatch(cli: Cli) -> Result<(), Failure> {
             robot_type,
             params,
             json,
-        } => commands::model::model(robot_type, &params, json),
+            simspark,
+        } => {
+            use commands::model::Format;
+            let format = match (json, simspark) {
+                (true, _) => Format::Json,
+                (_, true) => Format::Simspark,
+                _ => Format::Text,
+            };
+            commands::model::model(robot_type, &params, format)
+        }
     }
 }

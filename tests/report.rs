@@ -518,3 +518,87 @@ fn a_nao_report_has_an_animated_replay_of_expert_optim1_and_optim2() {
         );
     }
 }
+
+/// The entries of a `simspark-types.rb`: each row's name and its keys' texts.
+fn simspark_entries(text: &str) -> Vec<(String, Vec<(String, String)>)> {
+    let mut out: Vec<(String, Vec<(String, String)>)> = Vec::new();
+    for line in text.lines() {
+        if let Some(name) = line.strip_prefix("# ").and_then(|l| l.split_once(": ")) {
+            if !name.0.contains(' ') {
+                out.push((name.0.to_string(), Vec::new()));
+            }
+        } else if let Some((k, v)) = line.trim().split_once(" => ") {
+            let entry = out.last_mut().expect("a key inside an entry");
+            entry.1.push((
+                k.trim_matches('\'').to_string(),
+                v.trim_end_matches(',').to_string(),
+            ));
+        }
+    }
+    out
+}
+
+#[test]
+fn a_nao_report_gives_its_bodies_as_simspark_robot_types() {
+    let dir = scratch("report-simspark");
+    nao_run(&dir, "physical-technical.toml");
+    let out = report(&dir);
+    let page = std::fs::read_to_string(out.join("index.html")).unwrap();
+    assert!(
+        page.contains("href=\"simspark-types.rb\""),
+        "linked from the page"
+    );
+    let table: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("table4.json")).unwrap()).unwrap();
+    let text = std::fs::read_to_string(out.join("simspark-types.rb")).unwrap();
+    let entries = simspark_entries(&text);
+    let columns = table["columns"].as_array().unwrap();
+    assert_eq!(
+        entries.len(),
+        columns.len(),
+        "one entry per Table IV column: {text}"
+    );
+    for ((name, keys), column) in entries.iter().zip(columns) {
+        assert_eq!(Some(name.as_str()), column["name"].as_str(), "{text}");
+        let thigh = column["params"]["ThighRelHip2_Z"].as_f64().unwrap();
+        let given: Vec<&str> = keys.iter().map(|(k, _)| k.as_str()).collect();
+        assert_eq!(
+            given,
+            [
+                "Hip1RelTorso_X",
+                "Hip1RelTorso_Z",
+                "ThighRelHip2_Z",
+                "AnkleRelShank_Z",
+                "lj5_max_abs_speed",
+                "lj6_max_abs_speed",
+                "ElbowRelUpperArm_Y",
+                "UseToe"
+            ],
+            "the keys of naorobottypes.rb, in its order"
+        );
+        // The found thigh, to the bit; the rest of the body is type 0's.
+        let read: f64 = keys[2].1.parse().unwrap();
+        assert_eq!(read.to_bits(), thigh.to_bits(), "{name}: {text}");
+        // `naofarm model --simspark` prints the same entry for that body.
+        let model = succeed(
+            naofarm()
+                .args(["model", "--simspark", "--param"])
+                .arg(format!("ThighRelHip2_Z={thigh}")),
+        );
+        let entry = String::from_utf8(model.stdout).unwrap();
+        assert!(
+            text.contains(&format!("{},\n", entry.trim_end())),
+            "{name}: `model --simspark` printed {entry} and the report {text}"
+        );
+        assert!(
+            entry.contains("'AnkleRelShank_Z' => -0.055,") && entry.contains("'UseToe' => 'false'")
+        );
+    }
+    assert_eq!(entries[0].0, "Expert");
+    assert!(
+        entries[0]
+            .1
+            .contains(&("ThighRelHip2_Z".into(), "-0.04".into())),
+        "the expert's thigh is type 0's"
+    );
+}

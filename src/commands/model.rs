@@ -2,13 +2,28 @@
 
 use crate::common::{morphology, Failure};
 
+/// How `model` prints the robot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    /// A table for people.
+    Text,
+    /// One JSON document.
+    Json,
+    /// An entry of SimSpark's `naorobottypes.rb`.
+    Simspark,
+}
+
 /// Prints the league's type with morphology overrides.
-pub fn model(robot_type: u8, params: &[String], json: bool) -> Result<(), Failure> {
+pub fn model(robot_type: u8, params: &[String], format: Format) -> Result<(), Failure> {
     use worker::nao::model::NaoModel;
     let m = morphology(robot_type, params)?;
     let model = NaoModel::new(m).map_err(|e| Failure::Usage(e.into()))?;
     let mo = &model.morphology;
-    if json {
+    if format == Format::Simspark {
+        outln!("{}", mo.simspark_type());
+        return Ok(());
+    }
+    if format == Format::Json {
         let joints: Vec<serde_json::Value> = model
             .joints
             .iter()

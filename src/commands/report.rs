@@ -155,6 +155,9 @@ fn one(
     let (md, json) = table_text(&exp, &rows, trials);
     write("table4.md", &md)?;
     write("table4.json", &json)?;
+    if exp.model == TrialModel::Nao {
+        write(SIMSPARK_TYPES, &simspark_types(&exp, &rows)?)?;
+    }
     write(
         "index.html",
         &index_html(&exp, &view, &rows, trials, &figures, &replays),
@@ -166,6 +169,45 @@ fn one(
         rows,
         page: out.join("index.html"),
     })
+}
+
+/// The file of Table IV's bodies as SimSpark robot types.
+const SIMSPARK_TYPES: &str = "simspark-types.rb";
+
+/// Table IV's bodies as entries of SimSpark's `naorobottypes.rb`, each under
+/// a comment naming its row and its values, to try them on the league's
+/// server. Only the body travels: the walk is naofarm's own engine.
+fn simspark_types(exp: &Experiment, rows: &[Row]) -> Result<String, Failure> {
+    let mut text = format!(
+        "# The bodies of Table IV of run {name} (naofarm report), as SimSpark robot types.\n\
+         # Each entry has the keys of an entry of the NaoType array in rcssserver3d's\n\
+         # naorobottypes.rb (release 0.6.8 on): put one in that array, in place of a type\n\
+         # or beside them, to try the body on the league's server. Robot type {ty} is the\n\
+         # base; the walk parameters stay with naofarm's walk and are listed for reference.\n",
+        name = exp.name,
+        ty = exp.robot_type,
+    );
+    for r in rows {
+        let named = exp.full_params(&r.params);
+        let body = ParamValues::from_named(&named)
+            .map_err(|e| Failure::Job(anyhow!("{}'s parameters: {e}", r.name)))
+            .and_then(|values| {
+                let mut m = worker::nao::model::Morphology::of_type(exp.robot_type)
+                    .map_err(|e| Failure::Job(anyhow!("{}'s body: {e}", r.name)))?;
+                m.apply(&values)
+                    .map_err(|e| Failure::Job(anyhow!("{}'s body: {e}", r.name)))?;
+                Ok(m)
+            })?;
+        let values: Vec<String> = named.iter().map(|(k, v)| format!("{k} = {v}")).collect();
+        let _ = write!(
+            text,
+            "\n# {}: {}\n{},\n",
+            r.name,
+            values.join(", "),
+            body.simspark_type()
+        );
+    }
+    Ok(text)
 }
 
 /// The colour and fill of a decision's points: ACCEPT white with a dark
@@ -818,6 +860,13 @@ fn index_html(
         line("torso pitch (°, − leans back)", &torso_pitch);
     }
     h += "</table>\n";
+    if exp.model == TrialModel::Nao {
+        let _ = writeln!(
+            h,
+            "<p>These bodies as SimSpark robot types, to try them on the league's server: \
+             <a href=\"{SIMSPARK_TYPES}\">{SIMSPARK_TYPES}</a>.</p>"
+        );
+    }
     if !replays.is_empty() {
         h += "<h2>Watch them walk</h2>\n<p>The first Table IV trial of each set, re-simulated \
               bit for bit; bodies as segments from their parent's centre, to scale.</p>\n";

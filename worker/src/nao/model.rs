@@ -265,6 +265,29 @@ impl Morphology {
     pub fn hip_width_m(&self) -> f64 {
         2.0 * self.hip1_rel_torso_x
     }
+
+    /// This body as an entry of SimSpark's `naorobottypes.rb`, the `NaoType`
+    /// array rcssserver3d reads its robot types from (the keys, order and units
+    /// of release 0.6.8 on, `docs/spec/nao-model.md` §4), so that a body a run
+    /// found can be tried on the league's own server. Each number is printed
+    /// in the shortest form that reads back to the same `f64`.
+    #[must_use]
+    pub fn simspark_type(&self) -> String {
+        let mut lines = vec![
+            format!("    'Hip1RelTorso_X' => {}", self.hip1_rel_torso_x),
+            format!("    'Hip1RelTorso_Z' => {}", self.hip1_rel_torso_z),
+            format!("    'ThighRelHip2_Z' => {}", self.thigh_rel_hip2_z),
+            format!("    'AnkleRelShank_Z' => {}", self.ankle_rel_shank_z),
+            format!("    'lj5_max_abs_speed' => {}", self.lj5_max_speed),
+            format!("    'lj6_max_abs_speed' => {}", self.lj6_max_speed),
+            format!("    'ElbowRelUpperArm_Y' => {}", self.elbow_rel_upper_arm_y),
+            format!("    'UseToe' => '{}'", self.use_toe),
+        ];
+        if self.use_toe {
+            lines.push(format!("    'ToeLength' => {TOE_LENGTH}"));
+        }
+        format!("{{\n{}\n}}", lines.join(",\n"))
+    }
 }
 
 /// The robot: bodies (torso first) and joints.
@@ -783,6 +806,39 @@ mod tests {
             close(c[0], 0.016, 1e-3) && close(c[1], 0.0, 1e-9) && close(c[2], -0.079, 1e-3),
             "{c:?}"
         );
+    }
+
+    /// Types 0, 3 and 4 as rcssserver3d's `naorobottypes.rb` writes them
+    /// (`docs/spec/nao-model.md` §4), to the character.
+    #[test]
+    fn simspark_types_read_as_the_league_file_writes_them() {
+        let entry = |t| Morphology::of_type(t).unwrap().simspark_type();
+        assert_eq!(
+            entry(0),
+            "{\n    'Hip1RelTorso_X' => 0.055,\n    'Hip1RelTorso_Z' => -0.115,\n    \
+             'ThighRelHip2_Z' => -0.04,\n    'AnkleRelShank_Z' => -0.055,\n    \
+             'lj5_max_abs_speed' => 6.1395,\n    'lj6_max_abs_speed' => 6.1395,\n    \
+             'ElbowRelUpperArm_Y' => 0.07,\n    'UseToe' => 'false'\n}"
+        );
+        assert_eq!(
+            entry(3),
+            "{\n    'Hip1RelTorso_X' => 0.072954143,\n    'Hip1RelTorso_Z' => -0.115,\n    \
+             'ThighRelHip2_Z' => -0.067868424,\n    'AnkleRelShank_Z' => -0.082868424,\n    \
+             'lj5_max_abs_speed' => 6.1395,\n    'lj6_max_abs_speed' => 6.1395,\n    \
+             'ElbowRelUpperArm_Y' => 0.125736848,\n    'UseToe' => 'false'\n}"
+        );
+        assert!(entry(4).ends_with("'UseToe' => 'true',\n    'ToeLength' => 0.035517656\n}"));
+        // A found thigh reads back to the same bits.
+        let mut mo = Morphology::of_type(0).unwrap();
+        let thigh = -0.073_915_842_615_004_61;
+        mo.set(Param::ThighRelHip2Z, thigh).unwrap();
+        let text = mo.simspark_type();
+        let read: f64 = text
+            .lines()
+            .find_map(|l| l.trim().strip_prefix("'ThighRelHip2_Z' => "))
+            .and_then(|v| v.trim_end_matches(',').parse().ok())
+            .unwrap();
+        assert_eq!(read.to_bits(), thigh.to_bits(), "{text}");
     }
 
     #[test]
