@@ -39,6 +39,18 @@ const GRAVITY: f64 = 9.81;
 /// joint is past this (negative: before the stop, so the speculative rows
 /// are solved again too).
 const FIRM_STOP_RESOLVE_PAST_DEG: f64 = -0.5;
+/// Type 4's toe hinges (`lle7`, `rle7`) rest at 0°, 1° from their stop at
+/// −1°, so the walk meets that stop in every step, where other stops are
+/// rarely met: without a stop that holds within a step, a toe dragged along
+/// the ground ran up to 29° through it and the open-loop walk fell in all
+/// of 100 trials (docs/physics.md, item 5). So they have firm stops in every
+/// world, with this window when the physics gives the others none.
+pub const TOE_STOP_WINDOW_DEG: f64 = 3.0;
+
+/// Whether the model's joint `name` is a toe hinge (type 4).
+fn is_toe(name: &str) -> bool {
+    name.len() == 4 && name.ends_with("le7")
+}
 
 /// Physics settings of one simulation.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -261,6 +273,9 @@ struct Hinge {
     impulse: Option<ImpulseJointHandle>,
     link: usize,
     max_speed: f32,
+    /// Within this of a stop the hinge gets a speculative limit row, rad
+    /// (0: only once past it).
+    stop_window: f32,
 }
 
 /// Where a model body lives in the world.
@@ -414,9 +429,11 @@ impl Sim {
         world.integration_parameters.normalized_prediction_distance =
             settings.contact_prediction_m as f32;
         world.integration_parameters.static_contact_softness = contact;
-        world.integration_parameters.speculative_joint_limits = settings.firm_stops;
+        let firm_toes = model.joints.iter().any(|j| is_toe(&j.name));
+        let firm = settings.firm_stops || firm_toes;
+        world.integration_parameters.speculative_joint_limits = firm;
         world.integration_parameters.friction_in_bias_pass = settings.friction_in_bias_pass;
-        world.integration_parameters.joint_limits_after_contacts = if settings.firm_stops {
+        world.integration_parameters.joint_limits_after_contacts = if firm {
             FIRM_STOP_RESOLVE_PAST_DEG.to_radians() as f32
         } else {
             f32::MAX
@@ -570,6 +587,12 @@ impl Sim {
                 1.0
             };
             let max_speed = (joint.max_speed_rad_s * scale) as f32;
+            let stop_window = match (settings.firm_stops, is_toe(&joint.name)) {
+                (true, _) => settings.firm_stop_window_deg,
+                (false, true) => TOE_STOP_WINDOW_DEG,
+                (false, false) => 0.0,
+            }
+            .to_radians() as f32;
             if settings.impulse_joints {
                 let handle = world.impulse_joints.insert(*p, *c, builder, true);
                 hinges[j] = Some(Hinge {
@@ -577,6 +600,7 @@ impl Sim {
                     impulse: Some(handle),
                     link: 0,
                     max_speed,
+                    stop_window,
                 });
                 continue;
             }
@@ -589,6 +613,7 @@ impl Sim {
                 impulse: None,
                 link: 0,
                 max_speed,
+                stop_window,
             });
         }
         let Some(root_joint) = hinges.iter().flatten().next().map(|h: &Hinge| h.handle) else {
@@ -822,11 +847,6 @@ impl Sim {
     fn set_motors_and_stops(&mut self, commands: &[f64], damping: f32) {
         let inv_dt = self.world.integration_parameters.inv_dt();
         let every_limit_row = self.settings.every_limit_row;
-        let window = if self.settings.firm_stops {
-            self.settings.firm_stop_window_deg.to_radians() as f32
-        } else {
-            0.0
-        };
         let Some((mb, _)) = self.world.multibody_joints.get_mut(self.root_joint) else {
             return;
         };
@@ -839,6 +859,7 @@ impl Sim {
             let q = l.joint.coords()[3];
             let (lo, hi) = (joint.limits_rad.0 as f32, joint.limits_rad.1 as f32);
             let data = &mut l.joint.data;
+            let window = h.stop_window;
             if every_limit_row || q < lo + window || hi - window < q {
                 data.set_limits(JointAxis::AngX, [lo, hi]);
             } else {

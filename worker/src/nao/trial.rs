@@ -874,6 +874,43 @@ mod tests {
         assert!(cycles > 10, "{t:?}");
     }
 
+    /// Type 4's toes rest 1° from their stop and the walks drag them along
+    /// the ground. With `sim::TOE_STOP_WINDOW_DEG` their stops hold at the
+    /// default physics, where a toe ran up to 29° through its stop, and the
+    /// open-loop walk, which fell in every trial, stands in most.
+    #[test]
+    fn type_4_toes_hold_their_stops_and_the_open_loop_stands() {
+        let closed = Engine::of(WalkEngine::ClosedLoop);
+        for (engine, min_s) in [(OPEN, 0.7), (closed, 0.0)] {
+            let ts = run_many(
+                4,
+                &ParamValues::default(),
+                Batch {
+                    seed0: 777,
+                    n: 20,
+                    threads: 2,
+                },
+                10.0,
+                SimSettings::default(),
+                engine,
+            )
+            .unwrap();
+            let toes = ts
+                .iter()
+                .flat_map(|t| &t.stop_excess)
+                .filter(|e| e.joint.ends_with("le7"))
+                .map(|e| e.rad.to_degrees())
+                .fold(0.0, f64::max);
+            assert!(
+                toes < 1.0,
+                "{}: a toe {toes:.2}° past its stop",
+                engine.name()
+            );
+            let s = ts.iter().filter(|t| !t.measurement.fell).count() as f64 / 20.0;
+            assert!(s >= min_s, "{}: s = {s}", engine.name());
+        }
+    }
+
     #[test]
     fn sets_at_the_extremes_of_l_can_fall() {
         let corners = [
