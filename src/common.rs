@@ -39,6 +39,36 @@ pub fn load_experiment(path: &Path) -> Result<(Experiment, String), Failure> {
     Ok((e, text))
 }
 
+/// Where a NAO experiment's start replaces its robot type's own body: each
+/// morphology parameter whose expert (in L) or fixed value differs from the
+/// type's, with a line that says so; e.g. the paper's files' ThighRelHip2_Z
+/// −0.04 given type 3, whose own thigh is −0.067868424.
+pub fn type_overrides(e: &Experiment) -> Vec<(String, String)> {
+    use worker::nao::model::Morphology;
+    let Ok(body) = Morphology::of_type(e.robot_type) else {
+        return Vec::new();
+    };
+    let starts = e
+        .parameter
+        .iter()
+        .map(|p| (p.name.as_str(), p.expert_value(), "expert"))
+        .chain(e.fixed.iter().map(|(k, v)| (k.as_str(), *v, "fixed value")));
+    starts
+        .filter_map(|(name, value, what)| {
+            let own = protocol::params::find(name).and_then(|k| body.get(k.param))?;
+            (own != value).then(|| {
+                let line = format!(
+                    "{name}'s {what} {} replaces robot type {}'s own {}",
+                    protocol::params::Shown(value),
+                    e.robot_type,
+                    protocol::params::Shown(own)
+                );
+                (name.to_string(), line)
+            })
+        })
+        .collect()
+}
+
 pub fn parse_params(params: &[String]) -> Result<Vec<(String, f64)>, Failure> {
     params
         .iter()

@@ -70,6 +70,11 @@ pub fn open_run(job: &JobArgs) -> Result<(Run, Vec<coordinator::run::Effect>), F
         exp.model = TrialModel::parse(m).map_err(|e| Failure::Usage(anyhow!("--model: {e}")))?;
     }
     exp.validate().map_err(|e| Failure::Usage(e.into()))?;
+    if exp.model == TrialModel::Nao {
+        for (_, note) in crate::common::type_overrides(&exp) {
+            eprintln!("note: {note}");
+        }
+    }
     if !(job.silence_s.is_finite() && (0.1..=3600.0).contains(&job.silence_s)) {
         return Err(Failure::Usage(anyhow!(
             "--silence-s {}: must be in [0.1, 3600] seconds",

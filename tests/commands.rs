@@ -60,6 +60,54 @@ fn check_prints_the_physics_and_fixed_engine_constants_of_the_converged_experime
     }
 }
 
+/// An experiment whose start replaces its robot type's own body says so, in
+/// `check`, `run` and `trial --experiment`: the paper's files give
+/// ThighRelHip2_Z −0.04 (type 0's), type 3's own thigh is −0.067868424.
+/// No shipped file (all type 0) gets the note, nor a trial that gives the
+/// type's own value with `--param`.
+#[test]
+fn a_start_that_replaces_the_robot_types_body_is_noted() {
+    let note = "note: ThighRelHip2_Z's expert -0.04 replaces robot type 3's own -0.067868424";
+    for f in std::fs::read_dir(root().join("experiments")).unwrap() {
+        let f = f.unwrap().path();
+        if f.extension().is_some_and(|e| e == "toml") {
+            let out = succeed(naofarm().arg("check").arg(&f));
+            let text = String::from_utf8_lossy(&out.stdout);
+            assert!(!text.contains("note:"), "{}: {text}", f.display());
+        }
+    }
+    let dir = scratch("type-note");
+    let paper =
+        std::fs::read_to_string(root().join("experiments/physical-technical.toml")).unwrap();
+    let typed = paper.replace("robot_type = 0", "robot_type = 3");
+    assert_ne!(typed, paper);
+    let file = dir.join("type3.toml");
+    std::fs::write(&file, typed).unwrap();
+    let out = succeed(naofarm().arg("check").arg(&file));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(text.matches("note:").count(), 1, "{text}");
+    assert!(text.contains(note), "{text}");
+    let run = succeed(
+        naofarm()
+            .args(["run", "--workers", "1", "--iterations", "1", "--json"])
+            .arg(&file)
+            .arg("--out")
+            .arg(dir.join("run")),
+    );
+    assert!(String::from_utf8_lossy(&run.stderr).contains(note));
+    let trial = |extra: &[&str]| {
+        let out = succeed(
+            naofarm()
+                .args(["trial", "--trials", "1", "--type", "3", "--experiment"])
+                .arg(root().join("experiments/physical-technical.toml"))
+                .args(extra),
+        );
+        String::from_utf8_lossy(&out.stderr).to_string()
+    };
+    assert!(trial(&[]).contains(note));
+    assert!(!trial(&["--param", "ThighRelHip2_Z=-0.067868424"]).contains("note:"));
+}
+
 /// `trial --experiment FILE` runs the file's walk, physics, trial duration
 /// and expert set with its fixed values: the same trials, bit for bit, as
 /// those flags spelled out; `--param` overrides one value; a synthetic

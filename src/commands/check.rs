@@ -51,6 +51,9 @@ pub fn check(path: &Path, json: bool) -> Result<(), Failure> {
     }
     if e.model == protocol::experiment::TrialModel::Nao {
         outln!("  physics: {}", e.physics);
+        for (_, note) in crate::common::type_overrides(&e) {
+            outln!("  note: {note}");
+        }
     }
     let k = &e.pickout;
     outln!(

@@ -69,6 +69,18 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             None => params.push((name, v)),
         }
     }
+    if let Some(e) = &exp {
+        let given = parse_params(&a.params)?;
+        let typed = protocol::Experiment {
+            robot_type,
+            ..e.clone()
+        };
+        for (name, note) in crate::common::type_overrides(&typed) {
+            if !given.iter().any(|(n, _)| *n == name) {
+                eprintln!("note: {note}");
+            }
+        }
+    }
     let values = ParamValues::from_named(&params).map_err(|e| Failure::Usage(e.into()))?;
     let model = NaoModel::with_params(robot_type, &values).map_err(|e| Failure::Usage(e.into()))?;
     if a.threads.is_some_and(|t| t == 0 || t > 1024) {

@@ -200,6 +200,14 @@ impl Morphology {
         }
     }
 
+    /// The value of morphology parameter `p` in this body (None for a walk
+    /// parameter).
+    #[must_use]
+    pub fn get(&self, p: Param) -> Option<f64> {
+        let mut copy = *self;
+        copy.field_mut(p).map(|f| *f)
+    }
+
     /// Sets one morphology quantity (checked by [`Morphology::validate`]).
     pub fn set(&mut self, p: Param, value: f64) -> Result<(), ModelError> {
         let f = self
