@@ -44,7 +44,9 @@ const FIRM_STOP_RESOLVE_PAST_DEG: f64 = -0.5;
 /// rarely met: without a stop that holds within a step, a toe dragged along
 /// the ground ran up to 29° through it and the open-loop walk fell in all
 /// of 100 trials (docs/physics.md, item 5). So they have firm stops in every
-/// world, with this window when the physics gives the others none.
+/// world, with this window when the physics gives the others none; a world
+/// with toes then also solves every other joint's row past its stop again
+/// after the contacts, as a firm world does.
 pub const TOE_STOP_WINDOW_DEG: f64 = 3.0;
 
 /// Whether the model's joint `name` is a toe hinge (type 4).
