@@ -16,7 +16,10 @@ use sha3::{Digest, Sha3_256};
 pub const FINGERPRINT_FAULT_VAR: &str = "NAOFARM_FAULT_FINGERPRINT";
 
 /// The probe trials: the expert NAO on each walk engine for 3 simulated
-/// seconds, and the synthetic model, at the default physics.
+/// seconds at the default physics; the closed loop on type 4, whose toes
+/// have physics of their own (`nao::sim::TOE_STOP_WINDOW_DEG`), and on the
+/// firm file's physics, the vendored rapier's stops; and the synthetic
+/// model.
 fn probes() -> Vec<TrialRequest> {
     let req = |model, walk, duration_s| TrialRequest {
         run: "probe".into(),
@@ -35,6 +38,20 @@ fn probes() -> Vec<TrialRequest> {
         .iter()
         .map(|(_, w)| req(TrialModel::Nao, *w, 3.0))
         .collect();
+    let closed = req(TrialModel::Nao, WalkEngine::ClosedLoop, 3.0);
+    v.push(TrialRequest {
+        robot_type: 4,
+        ..closed.clone()
+    });
+    v.push(TrialRequest {
+        physics: Physics {
+            pgs_iterations: 28,
+            contact_hz: 60.0,
+            firm_stops: true,
+            ..Physics::default()
+        },
+        ..closed
+    });
     v.push(req(TrialModel::Synthetic, WalkEngine::default(), 10.0));
     v
 }
@@ -93,5 +110,9 @@ mod tests {
         })
         .unwrap();
         assert_ne!(a.x_m.to_bits(), b.x_m.to_bits());
+        // Type 4's toes and the firm stops run code that type 0 at the
+        // default physics never reaches: each has a probe.
+        assert!(probes().iter().any(|p| p.robot_type == 4));
+        assert!(probes().iter().any(|p| p.physics.firm_stops));
     }
 }
