@@ -39,13 +39,14 @@ pub fn load_experiment(path: &Path) -> Result<(Experiment, String), Failure> {
     Ok((e, text))
 }
 
-/// Where a NAO experiment's start replaces its robot type's own body: each
-/// morphology parameter whose expert (in L) or fixed value differs from the
-/// type's, with a line that says so; e.g. the paper's files' ThighRelHip2_Z
-/// −0.04 given type 3, whose own thigh is −0.067868424.
-pub fn type_overrides(e: &Experiment) -> Vec<(String, String)> {
+/// Where a NAO experiment's start replaces the body of robot type
+/// `robot_type` (the experiment's, or `trial --type`'s): each morphology
+/// parameter whose expert (in L) or fixed value differs from the type's,
+/// with a line that says so; e.g. the paper's files' ThighRelHip2_Z −0.04
+/// given type 3, whose own thigh is −0.067868424.
+pub fn type_overrides(e: &Experiment, robot_type: u8) -> Vec<(String, String)> {
     use worker::nao::model::Morphology;
-    let Ok(body) = Morphology::of_type(e.robot_type) else {
+    let Ok(body) = Morphology::of_type(robot_type) else {
         return Vec::new();
     };
     let starts = e
@@ -60,7 +61,7 @@ pub fn type_overrides(e: &Experiment) -> Vec<(String, String)> {
                 let line = format!(
                     "{name}'s {what} {} replaces robot type {}'s own {}",
                     protocol::params::Shown(value),
-                    e.robot_type,
+                    robot_type,
                     protocol::params::Shown(own)
                 );
                 (name.to_string(), line)

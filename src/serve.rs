@@ -71,7 +71,7 @@ pub fn open_run(job: &JobArgs) -> Result<(Run, Vec<coordinator::run::Effect>), F
     }
     exp.validate().map_err(|e| Failure::Usage(e.into()))?;
     if exp.model == TrialModel::Nao {
-        for (_, note) in crate::common::type_overrides(&exp) {
+        for (_, note) in crate::common::type_overrides(&exp, exp.robot_type) {
             eprintln!("note: {note}");
         }
     }

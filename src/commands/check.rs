@@ -51,7 +51,7 @@ pub fn check(path: &Path, json: bool) -> Result<(), Failure> {
     }
     if e.model == protocol::experiment::TrialModel::Nao {
         outln!("  physics: {}", e.physics);
-        for (_, note) in crate::common::type_overrides(&e) {
+        for (_, note) in crate::common::type_overrides(&e, e.robot_type) {
             outln!("  note: {note}");
         }
     }

@@ -189,15 +189,11 @@ fn simspark_types(exp: &Experiment, rows: &[Row]) -> Result<String, Failure> {
     );
     for r in rows {
         let named = exp.full_params(&r.params);
-        let body = ParamValues::from_named(&named)
-            .map_err(|e| Failure::Job(anyhow!("{}'s parameters: {e}", r.name)))
-            .and_then(|values| {
-                let mut m = worker::nao::model::Morphology::of_type(exp.robot_type)
-                    .map_err(|e| Failure::Job(anyhow!("{}'s body: {e}", r.name)))?;
-                m.apply(&values)
-                    .map_err(|e| Failure::Job(anyhow!("{}'s body: {e}", r.name)))?;
-                Ok(m)
-            })?;
+        let values = ParamValues::from_named(&named)
+            .map_err(|e| Failure::Job(anyhow!("{}'s parameters: {e}", r.name)))?;
+        let body = worker::nao::model::NaoModel::with_params(exp.robot_type, &values)
+            .map_err(|e| Failure::Job(anyhow!("{}'s body: {e}", r.name)))?
+            .morphology;
         let values: Vec<String> = named.iter().map(|(k, v)| format!("{k} = {v}")).collect();
         let _ = write!(
             text,

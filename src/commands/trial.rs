@@ -63,19 +63,15 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         .as_ref()
         .map(|e| e.full_params(&e.expert_values()))
         .unwrap_or_default();
-    for (name, v) in parse_params(&a.params)? {
-        match params.iter_mut().find(|(n, _)| *n == name) {
-            Some(slot) => slot.1 = v,
-            None => params.push((name, v)),
+    let given = parse_params(&a.params)?;
+    for (name, v) in &given {
+        match params.iter_mut().find(|(n, _)| n == name) {
+            Some(slot) => slot.1 = *v,
+            None => params.push((name.clone(), *v)),
         }
     }
     if let Some(e) = &exp {
-        let given = parse_params(&a.params)?;
-        let typed = protocol::Experiment {
-            robot_type,
-            ..e.clone()
-        };
-        for (name, note) in crate::common::type_overrides(&typed) {
+        for (name, note) in crate::common::type_overrides(e, robot_type) {
             if !given.iter().any(|(n, _)| *n == name) {
                 eprintln!("note: {note}");
             }
