@@ -74,6 +74,9 @@ pub fn open_run(job: &JobArgs) -> Result<(Run, Vec<coordinator::run::Effect>), F
         for (_, note) in crate::common::type_overrides(&exp, exp.robot_type) {
             eprintln!("note: {note}");
         }
+        if let Some(note) = crate::common::toe_note(exp.robot_type, exp.walk, &exp.physics) {
+            eprintln!("note: {note}");
+        }
     }
     if !(job.silence_s.is_finite() && (0.1..=3600.0).contains(&job.silence_s)) {
         return Err(Failure::Usage(anyhow!(

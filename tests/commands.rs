@@ -108,6 +108,69 @@ fn a_start_that_replaces_the_robot_types_body_is_noted() {
     assert!(!trial(&["--param", "ThighRelHip2_Z=-0.067868424"]).contains("note:"));
 }
 
+/// Type 4 on physics where its toes make the closed loop's feet bounce (10
+/// ms steps, a ground stiffer than 60 Hz, no firm stops) is noted by
+/// `check`, `run` and `trial`, with what to use instead; on the firm,
+/// converged and roll-aim files, with the open loop, and for type 0 it is not.
+#[test]
+fn type_4_on_physics_its_toes_cannot_stand_is_noted() {
+    let note = "note: robot type 4's toes on 10 ms steps, a 500 Hz ground and no firm stops";
+    let dir = scratch("toe-note");
+    let written = std::cell::Cell::new(0);
+    let checked = |file: &str, edit: &dyn Fn(String) -> String| {
+        let text = std::fs::read_to_string(root().join("experiments").join(file)).unwrap();
+        let typed = edit(text.replace("robot_type = 0", "robot_type = 4"));
+        assert!(typed.contains("robot_type = 4"), "{file}");
+        written.set(written.get() + 1);
+        let path = dir.join(format!("{}-{file}", written.get()));
+        std::fs::write(&path, typed).unwrap();
+        let out = succeed(naofarm().arg("check").arg(&path));
+        (path, String::from_utf8_lossy(&out.stdout).contains(note))
+    };
+    let same = |t: String| t;
+    let (default, noted) = checked("physical-technical.toml", &same);
+    assert!(noted, "the default file");
+    for file in [
+        "physical-technical-firm.toml",
+        "physical-technical-converged.toml",
+        "physical-technical-arms-5ms-roll-aim.toml",
+    ] {
+        assert!(!checked(file, &same).1, "{file}");
+    }
+    let open = |t: String| t.replace("walk = \"closed-loop\"", "walk = \"open-loop\"");
+    assert!(
+        !checked("physical-technical.toml", &open).1,
+        "the open loop"
+    );
+    let run = succeed(
+        naofarm()
+            .args(["run", "--workers", "1", "--iterations", "1", "--json"])
+            .arg(&default)
+            .arg("--out")
+            .arg(dir.join("run")),
+    );
+    assert!(String::from_utf8_lossy(&run.stderr).contains(note));
+    let trial = |extra: &[&str]| {
+        let out = succeed(
+            naofarm()
+                .args(["trial", "--trials", "1", "--walk", "closed-loop"])
+                .args(extra),
+        );
+        String::from_utf8_lossy(&out.stderr).contains(note)
+    };
+    assert!(trial(&["--type", "4"]));
+    assert!(!trial(&["--type", "0"]));
+    assert!(!trial(&[
+        "--type",
+        "4",
+        "--firm-stops",
+        "true",
+        "--contact-hz",
+        "60"
+    ]));
+    assert!(!trial(&["--type", "4", "--substeps", "4"]));
+}
+
 /// `trial --experiment FILE` runs the file's walk, physics, trial duration
 /// and expert set with its fixed values: the same trials, bit for bit, as
 /// those flags spelled out; `--param` overrides one value; a synthetic

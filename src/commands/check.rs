@@ -54,6 +54,9 @@ pub fn check(path: &Path, json: bool) -> Result<(), Failure> {
         for (_, note) in crate::common::type_overrides(&e, e.robot_type) {
             outln!("  note: {note}");
         }
+        if let Some(note) = crate::common::toe_note(e.robot_type, e.walk, &e.physics) {
+            outln!("  note: {note}");
+        }
     }
     let k = &e.pickout;
     outln!(

@@ -118,6 +118,9 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         protocol::experiment::gain_has_feedback(walk, name)
             .map_err(|m| Failure::Usage(anyhow!("--param {m}")))?;
     }
+    if let Some(note) = crate::common::toe_note(robot_type, walk, &physics) {
+        eprintln!("note: {note}");
+    }
     let mut engine = trial::Engine::of(walk);
     for kv in &a.engine {
         let (k, v) = kv

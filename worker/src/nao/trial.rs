@@ -911,6 +911,42 @@ mod tests {
         }
     }
 
+    /// What `naofarm check` notes for type 4 (`common::toe_note` in the
+    /// binary): on the default physics (10 ms steps, a 500 Hz ground, no
+    /// firm stops) the closed loop's expert set falls in most trials, its
+    /// feet bouncing on the toe hinges; on the firm file's physics it walks.
+    /// When the first half fails, the note has become wrong: drop it.
+    #[test]
+    fn type_4s_closed_loop_falls_on_the_stiff_ground_and_walks_on_the_firm_physics() {
+        let firm = SimSettings::with_physics(&protocol::Physics {
+            pgs_iterations: 28,
+            contact_hz: 60.0,
+            firm_stops: true,
+            ..protocol::Physics::default()
+        });
+        for (settings, walks) in [(SimSettings::default(), false), (firm, true)] {
+            let ts = run_many(
+                4,
+                &ParamValues::default(),
+                Batch {
+                    seed0: 777,
+                    n: 20,
+                    threads: 2,
+                },
+                10.0,
+                settings,
+                Engine::of(WalkEngine::ClosedLoop),
+            )
+            .unwrap();
+            let s = ts.iter().filter(|t| !t.measurement.fell).count() as f64 / 20.0;
+            if walks {
+                assert!(s >= 0.9, "firm physics: s = {s}");
+            } else {
+                assert!(s <= 0.5, "default physics: s = {s}");
+            }
+        }
+    }
+
     #[test]
     fn sets_at_the_extremes_of_l_can_fall() {
         let corners = [
