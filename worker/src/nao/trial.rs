@@ -882,19 +882,7 @@ mod tests {
     fn type_4_toes_hold_their_stops_and_the_open_loop_stands() {
         let closed = Engine::of(WalkEngine::ClosedLoop);
         for (engine, min_s) in [(OPEN, 0.7), (closed, 0.0)] {
-            let ts = run_many(
-                4,
-                &ParamValues::default(),
-                Batch {
-                    seed0: 777,
-                    n: 20,
-                    threads: 2,
-                },
-                10.0,
-                SimSettings::default(),
-                engine,
-            )
-            .unwrap();
+            let (ts, s) = type_4_expert(SimSettings::default(), engine);
             let toes = ts
                 .iter()
                 .flat_map(|t| &t.stop_excess)
@@ -906,9 +894,20 @@ mod tests {
                 "{}: a toe {toes:.2}° past its stop",
                 engine.name()
             );
-            let s = ts.iter().filter(|t| !t.measurement.fell).count() as f64 / 20.0;
             assert!(s >= min_s, "{}: s = {s}", engine.name());
         }
+    }
+
+    /// Type 4's expert set over 20 trials from seed 777, and its s.
+    fn type_4_expert(settings: SimSettings, engine: Engine) -> (Vec<NaoTrial>, f64) {
+        let batch = Batch {
+            seed0: 777,
+            n: 20,
+            threads: 2,
+        };
+        let ts = run_many(4, &ParamValues::default(), batch, 10.0, settings, engine).unwrap();
+        let s = ts.iter().filter(|t| !t.measurement.fell).count() as f64 / 20.0;
+        (ts, s)
     }
 
     /// What `naofarm check` notes for type 4 (`common::toe_note` in the
@@ -925,20 +924,7 @@ mod tests {
             ..protocol::Physics::default()
         });
         for (settings, walks) in [(SimSettings::default(), false), (firm, true)] {
-            let ts = run_many(
-                4,
-                &ParamValues::default(),
-                Batch {
-                    seed0: 777,
-                    n: 20,
-                    threads: 2,
-                },
-                10.0,
-                settings,
-                Engine::of(WalkEngine::ClosedLoop),
-            )
-            .unwrap();
-            let s = ts.iter().filter(|t| !t.measurement.fell).count() as f64 / 20.0;
+            let (_, s) = type_4_expert(settings, Engine::of(WalkEngine::ClosedLoop));
             if walks {
                 assert!(s >= 0.9, "firm physics: s = {s}");
             } else {
