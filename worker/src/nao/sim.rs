@@ -37,7 +37,8 @@ pub const DRAG: f64 = 0.01;
 const GRAVITY: f64 = 9.81;
 /// With firm stops, limit rows are solved again after the contacts once a
 /// joint is past this (negative: before the stop, so the speculative rows
-/// are solved again too).
+/// are solved again too, and so is every servo row, which the vendored
+/// rapier's filter reads as a limit row 0° past: vendor/rapier3d/NAOFARM.md).
 const FIRM_STOP_RESOLVE_PAST_DEG: f64 = -0.5;
 /// Type 4's toe hinges (`lle7`, `rle7`) rest at 0°, 1° from their stop at
 /// −1°, so the walk meets that stop in every step, where other stops are

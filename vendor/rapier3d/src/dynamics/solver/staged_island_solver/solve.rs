@@ -357,6 +357,9 @@ pub(super) unsafe fn solve_pass(
         // naofarm's patch (`joint_limits_after_contacts`): the multibodies'
         // active limit rows are solved once more after the contacts, so a
         // landing's contact impulses cannot leave a joint past its stop.
+        // Their motor rows too when the threshold is negative: the release
+        // gives a motor row `WritebackId::Limit`, bounds other than [0, 0]
+        // and no bias (0 past), so the filter below takes it (NAOFARM.md).
         let resweep_past = ctx.base_params.joint_limits_after_contacts;
         if has_generic_joints && resweep_past < Real::MAX {
             let joints = unsafe { &mut *ctx.joint_constraints };
