@@ -87,14 +87,7 @@ fn a_start_that_replaces_the_robot_types_body_is_noted() {
     let text = String::from_utf8_lossy(&out.stdout);
     assert_eq!(text.matches("note:").count(), 1, "{text}");
     assert!(text.contains(note), "{text}");
-    let run = succeed(
-        naofarm()
-            .args(["run", "--workers", "1", "--iterations", "1", "--json"])
-            .arg(&file)
-            .arg("--out")
-            .arg(dir.join("run")),
-    );
-    assert!(String::from_utf8_lossy(&run.stderr).contains(note));
+    assert!(one_iteration_stderr(&file, &dir.join("run")).contains(note));
     let trial = |extra: &[&str]| {
         let out = succeed(
             naofarm()
@@ -106,6 +99,19 @@ fn a_start_that_replaces_the_robot_types_body_is_noted() {
     };
     assert!(trial(&[]).contains(note));
     assert!(!trial(&["--param", "ThighRelHip2_Z=-0.067868424"]).contains("note:"));
+}
+
+/// What `naofarm run` prints on stderr for one iteration of `file` on one
+/// worker, its journal in `out`.
+fn one_iteration_stderr(file: &std::path::Path, out: &std::path::Path) -> String {
+    let run = succeed(
+        naofarm()
+            .args(["run", "--workers", "1", "--iterations", "1", "--json"])
+            .arg(file)
+            .arg("--out")
+            .arg(out),
+    );
+    String::from_utf8_lossy(&run.stderr).to_string()
 }
 
 /// Type 4 on physics where its toes make the closed loop's feet bounce (10
@@ -142,14 +148,7 @@ fn type_4_on_physics_its_toes_cannot_stand_is_noted() {
         !checked("physical-technical.toml", &open).1,
         "the open loop"
     );
-    let run = succeed(
-        naofarm()
-            .args(["run", "--workers", "1", "--iterations", "1", "--json"])
-            .arg(&default)
-            .arg("--out")
-            .arg(dir.join("run")),
-    );
-    assert!(String::from_utf8_lossy(&run.stderr).contains(note));
+    assert!(one_iteration_stderr(&default, &dir.join("run")).contains(note));
     let trial = |extra: &[&str]| {
         let out = succeed(
             naofarm()
