@@ -70,19 +70,10 @@ pub fn type_overrides(e: &Experiment, robot_type: u8) -> Vec<(String, String)> {
         .collect()
 }
 
-/// The coarsest physics step on which type 4's toe hinges stay on a stiff
-/// ground without firm stops (`toe_note`), ms.
-const TOE_COARSEST_STEP_MS: f64 = 10.0;
-/// The stiffest ground type 4's toes stand on at that step without firm
-/// stops (`toe_note`), Hz: the firm file's.
-const TOE_STIFFEST_GROUND_HZ: f64 = 60.0;
-
-/// Whether a closed-loop walk of robot type `robot_type` on `physics` is one
-/// the engine cannot carry: a type with toes, at 10 ms steps or coarser, on
-/// a ground stiffer than 60 Hz, without firm stops. There the toe hinges
-/// make the feet bounce and the expert set falls in about 3 trials of 4
-/// (docs/walk.md, "The league's five types": welded toes walk; nothing on
-/// the hinge alone mends it). A line that says so and what to use, or none.
+/// A closed-loop walk of robot type `robot_type` on `physics` that the
+/// engine cannot carry: a type with toes on physics where they bounce
+/// (`worker::nao::sim::toes_bounce`). A line that says so and what to use,
+/// or none.
 #[must_use]
 pub fn toe_note(
     robot_type: u8,
@@ -91,21 +82,19 @@ pub fn toe_note(
 ) -> Option<String> {
     use worker::nao::model::Morphology;
     let toes = Morphology::of_type(robot_type).is_ok_and(|m| m.use_toe);
-    let step_ms = 20.0 / f64::from(physics.substeps.max(1));
     (toes
         && walk == protocol::experiment::WalkEngine::ClosedLoop
-        && !physics.firm_stops
-        && step_ms >= TOE_COARSEST_STEP_MS
-        && physics.contact_hz > TOE_STIFFEST_GROUND_HZ)
-        .then(|| {
-            format!(
-                "robot type {robot_type}'s toes on {step_ms} ms steps, a {} Hz ground and no firm \
-                 stops: its feet bounce and the expert set falls in most trials (docs/walk.md, \
-                 \"The league's five types\"); use the firm file's physics (firm_stops = true, \
-                 contact_hz = 60) or finer steps (substeps = 4 or more)",
-                physics.contact_hz
-            )
-        })
+        && worker::nao::sim::toes_bounce(physics))
+    .then(|| {
+        format!(
+            "robot type {robot_type}'s toes on {} ms steps, a {} Hz ground and no firm \
+             stops: its feet bounce and the expert set falls in most trials (docs/walk.md, \
+             \"The league's five types\"); use the firm file's physics (firm_stops = true, \
+             contact_hz = 60) or finer steps (substeps = 4 or more)",
+            20.0 / f64::from(physics.substeps.max(1)),
+            physics.contact_hz
+        )
+    })
 }
 
 pub fn parse_params(params: &[String]) -> Result<Vec<(String, f64)>, Failure> {

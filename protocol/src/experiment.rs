@@ -331,6 +331,19 @@ impl Default for Physics {
 }
 
 impl Physics {
+    /// The firm file's physics (`experiments/physical-technical-firm.toml`):
+    /// firm stops, 28 PGS iterations and a 60 Hz ground at the farm's
+    /// 2 × 10 ms steps (docs/walk.md, "Firm stops").
+    #[must_use]
+    pub fn firm() -> Self {
+        Self {
+            pgs_iterations: 28,
+            contact_hz: 60.0,
+            firm_stops: true,
+            ..Self::default()
+        }
+    }
+
     /// Checks each count against its range; names the first one outside.
     pub fn validate(&self) -> Result<(), (&'static str, String)> {
         for (field, v, hi) in [
@@ -901,6 +914,9 @@ expert = -0.04
                     .physics
                     .to_string()
                     .ends_with("drawn per trial from 16-30 steps per cycle"));
+            }
+            if f.ends_with("-firm.toml") {
+                assert_eq!(e.physics, Physics::firm(), "{f}");
             }
             if f.ends_with("stiff.toml") {
                 assert_eq!(e.physics.substeps, Physics::default().substeps, "{f}");

@@ -44,12 +44,7 @@ fn probes() -> Vec<TrialRequest> {
         ..closed.clone()
     });
     v.push(TrialRequest {
-        physics: Physics {
-            pgs_iterations: 28,
-            contact_hz: 60.0,
-            firm_stops: true,
-            ..Physics::default()
-        },
+        physics: Physics::firm(),
         ..closed
     });
     v.push(req(TrialModel::Synthetic, WalkEngine::default(), 10.0));

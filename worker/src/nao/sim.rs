@@ -50,6 +50,26 @@ const FIRM_STOP_RESOLVE_PAST_DEG: f64 = -0.5;
 /// after the contacts, as a firm world does.
 pub const TOE_STOP_WINDOW_DEG: f64 = 3.0;
 
+/// The coarsest physics step on which type 4's toe hinges stand on a stiff
+/// ground without firm stops (`toes_bounce`), ms.
+const TOE_COARSEST_STEP_MS: f64 = 10.0;
+/// The stiffest ground type 4's toes stand on at that step without firm
+/// stops (`toes_bounce`), Hz: the firm file's.
+const TOE_STIFFEST_GROUND_HZ: f64 = 60.0;
+
+/// Whether `physics` is one on which type 4's toe hinges make the closed
+/// loop's feet bounce: 10 ms steps or coarser, a ground stiffer than 60 Hz,
+/// no firm stops. There its expert set falls in about 3 trials of 4
+/// (docs/walk.md, "The league's five types": welded toes walk; nothing on
+/// the hinge alone mends it).
+#[must_use]
+pub fn toes_bounce(physics: &protocol::Physics) -> bool {
+    let step_ms = 20.0 / f64::from(physics.substeps.max(1));
+    !physics.firm_stops
+        && step_ms >= TOE_COARSEST_STEP_MS
+        && physics.contact_hz > TOE_STIFFEST_GROUND_HZ
+}
+
 /// Whether the model's joint `name` is a toe hinge (type 4).
 fn is_toe(name: &str) -> bool {
     name.len() == 4 && name.ends_with("le7")
