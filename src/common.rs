@@ -91,7 +91,7 @@ pub fn toe_note(
              stops: its feet bounce and the expert set falls in most trials (docs/walk.md, \
              \"The league's five types\"); use the firm file's physics (firm_stops = true, \
              contact_hz = 60) or finer steps (substeps = 4 or more)",
-            20.0 / f64::from(physics.substeps.max(1)),
+            physics.step_ms(),
             physics.contact_hz
         )
     })

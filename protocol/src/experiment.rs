@@ -289,7 +289,7 @@ impl std::fmt::Display for Physics {
             f,
             "{} x {:.3} ms steps per 20 ms cycle, {} solver x {} PGS iterations, armature {} kg m^2",
             self.substeps,
-            20.0 / f64::from(self.substeps.max(1)),
+            self.step_ms(),
             self.solver_iterations,
             self.pgs_iterations,
             self.armature_kg_m2
@@ -331,6 +331,13 @@ impl Default for Physics {
 }
 
 impl Physics {
+    /// One physics step, ms: the 20 ms cycle over `substeps` (the coarsest
+    /// step of a band).
+    #[must_use]
+    pub fn step_ms(&self) -> f64 {
+        20.0 / f64::from(self.substeps.max(1))
+    }
+
     /// The firm file's physics (`experiments/physical-technical-firm.toml`):
     /// firm stops, 28 PGS iterations and a 60 Hz ground at the farm's
     /// 2 × 10 ms steps (docs/walk.md, "Firm stops").

@@ -64,9 +64,8 @@ const TOE_STIFFEST_GROUND_HZ: f64 = 60.0;
 /// the hinge alone mends it).
 #[must_use]
 pub fn toes_bounce(physics: &protocol::Physics) -> bool {
-    let step_ms = 20.0 / f64::from(physics.substeps.max(1));
     !physics.firm_stops
-        && step_ms >= TOE_COARSEST_STEP_MS
+        && physics.step_ms() >= TOE_COARSEST_STEP_MS
         && physics.contact_hz > TOE_STIFFEST_GROUND_HZ
 }
 

@@ -911,16 +911,17 @@ mod tests {
     }
 
     /// What `naofarm check` notes for type 4 (`sim::toes_bounce`, printed by
-    /// `common::toe_note` in the binary): on the default physics (10 ms steps, a 500 Hz ground, no
-    /// firm stops) the closed loop's expert set falls in most trials, its
-    /// feet bouncing on the toe hinges; on the firm file's physics it walks.
+    /// `common::toe_note` in the binary): on the default physics (10 ms
+    /// steps, a 500 Hz ground, no firm stops) the closed loop's expert set
+    /// falls in most trials, its feet bouncing on the toe hinges; on the
+    /// firm file's physics it walks.
     /// When the first half fails, the note has become wrong: drop it.
     #[test]
     fn type_4s_closed_loop_falls_on_the_stiff_ground_and_walks_on_the_firm_physics() {
         let default = protocol::Physics::default();
         let firm = protocol::Physics::firm();
-        assert!(super::super::sim::toes_bounce(&default));
-        assert!(!super::super::sim::toes_bounce(&firm));
+        assert!(crate::nao::sim::toes_bounce(&default));
+        assert!(!crate::nao::sim::toes_bounce(&firm));
         for (physics, walks) in [(default, false), (firm, true)] {
             let settings = SimSettings::with_physics(&physics);
             let (_, s) = type_4_expert(settings, Engine::of(WalkEngine::ClosedLoop));
