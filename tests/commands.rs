@@ -981,6 +981,46 @@ fn bench_sim_reports_its_shares_over_rounds() {
         assert!(lo <= share && share <= hi, "{key}: {lo} {share} {hi}");
     }
     let rows = v["rows"].as_array().unwrap();
+    // Each file's walk is measured against the open loop on its own physics
+    // too: a twin row of the open loop with the file's steps, solver,
+    // contacts, stops and welds (the arms files' arms free), and a share.
+    let files: Vec<&str> = rows.iter().filter_map(|r| r["file"].as_str()).collect();
+    assert!(files.contains(&"arms_5ms_roll"), "{v}");
+    for key in files {
+        let of = |motion: &str| {
+            let found: Vec<&serde_json::Value> = rows
+                .iter()
+                .filter(|r| r["file"] == key && r["motion"] == motion)
+                .collect();
+            assert_eq!(found.len(), 1, "{key} {motion}: {v}");
+            found[0]
+        };
+        let (walk, twin) = (of("walk-cl"), of("walk"));
+        for field in [
+            "substeps",
+            "substeps_max",
+            "pgs_iterations",
+            "solver_iterations",
+            "weld_upper_body",
+            "weld_head",
+            "contact_hz",
+            "firm_stops",
+        ] {
+            assert_eq!(walk[field], twin[field], "{key} {field}: {walk} {twin}");
+        }
+        let share = v[format!("{key}_share_of_open_loop_on_its_physics")]
+            .as_f64()
+            .unwrap();
+        let spread = &v[format!("{key}_share_on_its_physics_spread")];
+        let (lo, hi) = (spread[0].as_f64().unwrap(), spread[1].as_f64().unwrap());
+        assert!(share > 0.0 && share.is_finite(), "{key}: {v}");
+        assert!(lo <= share && share <= hi, "{key}: {lo} {share} {hi}");
+    }
+    let arms = rows
+        .iter()
+        .find(|r| r["file"] == "arms_5ms_roll" && r["motion"] == "walk")
+        .unwrap();
+    assert_eq!(arms["weld_upper_body"], false, "the arms swing: {arms}");
     assert!(
         rows.iter()
             .all(|r| r["realtime_factor"].as_f64().unwrap() > 0.0),

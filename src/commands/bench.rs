@@ -334,6 +334,8 @@ fn farm(a: &FarmBenchArgs) -> Result<(), Failure> {
 
 struct Row {
     label: String,
+    /// The experiment file's key, on a file's walk and on its open-loop twin.
+    file: Option<&'static str>,
     motion: &'static str,
     settings: SimSettings,
     sim_s: f64,
@@ -367,6 +369,7 @@ fn measure_stand(settings: SimSettings, seconds: f64) -> Result<Row, Failure> {
     }
     Ok(Row {
         label: String::new(),
+        file: None,
         motion: "stand",
         settings,
         sim_s: p.time_s,
@@ -383,24 +386,20 @@ fn measure_walk(
     walk: protocol::WalkEngine,
     params: &ParamValues,
 ) -> Result<Row, Failure> {
+    let engine = trial::Engine::of(walk);
+    // What the trial runs on (the arms free where the walk swings them).
+    let ran = trial::walk_settings(settings, &engine.gait.with_params(params));
     let (t0, cpu0) = (Instant::now(), thread_cpu_s());
-    let t = trial::run_observed(
-        0,
-        params,
-        1,
-        seconds,
-        settings,
-        trial::Engine::of(walk),
-        &mut |_, _, _| {},
-    )
-    .map_err(|e| Failure::Job(e.into()))?;
+    let t = trial::run_observed(0, params, 1, seconds, settings, engine, &mut |_, _, _| {})
+        .map_err(|e| Failure::Job(e.into()))?;
     Ok(Row {
         label: String::new(),
+        file: None,
         motion: match walk {
             protocol::WalkEngine::OpenLoop => "walk",
             protocol::WalkEngine::ClosedLoop => "walk-cl",
         },
-        settings,
+        settings: ran,
         sim_s: t.measurement.sim_time_s,
         steps: t.measurement.sim_time_s / CYCLE_S * f64::from(settings.substeps),
         wall_s: t0.elapsed().as_secs_f64(),
@@ -487,16 +486,25 @@ const FILES: [FileWalk; 8] = [
 ];
 
 /// The walk of a shipped experiment file, as the file sets it (its physics
-/// and its fixed values, with its expert set), measured like the others.
+/// and its fixed values, with its expert set), measured like the others; or,
+/// with `open_loop`, the open loop's expert walk on that walk's physics (the
+/// file's steps, solver, contacts and stops, and the same joints welded), so
+/// that the two differ in the walk alone.
 /// A file with a band of steps walks once at each step of its band, and its
 /// row sums them: the farm's trials draw their steps uniformly from the
 /// band, so that is what a trial costs on average.
-fn measure_file_walk(f: &FileWalk, seconds: f64) -> Result<Row, Failure> {
+fn measure_file_walk(f: &FileWalk, seconds: f64, open_loop: bool) -> Result<Row, Failure> {
     let bad = |e: String| Failure::Job(anyhow!("the {} experiment file: {e}", f.name()));
     let file = protocol::Experiment::from_toml(f.text).map_err(|e| bad(e.to_string()))?;
     let params = ParamValues::from_named(&file.full_params(&file.expert_values()))
         .map_err(|e| bad(e.to_string()))?;
-    let settings = SimSettings::with_physics(&file.physics);
+    let gait = trial::Engine::of(file.walk).gait.with_params(&params);
+    let settings = trial::walk_settings(SimSettings::with_physics(&file.physics), &gait);
+    let (walk, params) = if open_loop {
+        (protocol::WalkEngine::OpenLoop, ParamValues::default())
+    } else {
+        (file.walk, params)
+    };
     let mut sum: Option<Row> = None;
     for substeps in settings.substeps_band() {
         let fixed = SimSettings {
@@ -504,7 +512,7 @@ fn measure_file_walk(f: &FileWalk, seconds: f64) -> Result<Row, Failure> {
             substeps_max: 0,
             ..settings
         };
-        let r = measure_walk(fixed, seconds, file.walk, &params)?;
+        let r = measure_walk(fixed, seconds, walk, &params)?;
         sum = Some(match sum {
             None => r,
             Some(t) => Row {
@@ -519,7 +527,13 @@ fn measure_file_walk(f: &FileWalk, seconds: f64) -> Result<Row, Failure> {
     }
     let mut r = sum.ok_or_else(|| bad("no physics steps".into()))?;
     r.label = f.label.into();
-    r.settings = settings;
+    r.file = Some(f.key);
+    // The band's steps, as the file gives them (each run had one of them).
+    r.settings = SimSettings {
+        substeps: settings.substeps,
+        substeps_max: settings.substeps_max,
+        ..r.settings
+    };
     Ok(r)
 }
 
@@ -527,7 +541,8 @@ fn measure_file_walk(f: &FileWalk, seconds: f64) -> Result<Row, Failure> {
 enum Spec {
     /// Label, settings and motion (`stand`, `walk`, `walk-cl`).
     Variant(&'static str, SimSettings, &'static str),
-    File(&'static FileWalk),
+    /// A file's walk, or with `true` the open loop on its physics.
+    File(&'static FileWalk, bool),
 }
 
 /// `naofarm bench sim`: real-time factor and physics steps per second on one core.
@@ -613,8 +628,13 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             specs.push(Spec::Variant(label, s, motion));
         }
     }
+    // Each file's walk, then at once its open-loop twin, so that the two
+    // meet the same spell of a shared machine.
     let first_file = specs.len();
-    specs.extend(FILES.iter().map(Spec::File));
+    for f in &FILES {
+        specs.push(Spec::File(f, false));
+        specs.push(Spec::File(f, true));
+    }
     // Rounds of every measurement in turn: a slow spell of a shared
     // machine then slows each row alike, and the ratios are per round.
     let mut runs: Vec<Vec<Row>> = specs.iter().map(|_| Vec::new()).collect();
@@ -628,10 +648,15 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
                 Spec::Variant(_, s, _) => {
                     measure_walk(s, a.seconds, protocol::WalkEngine::ClosedLoop, &expert)?
                 }
-                Spec::File(f) => measure_file_walk(f, a.seconds)?,
+                Spec::File(f, open_loop) => measure_file_walk(f, a.seconds, open_loop)?,
             };
-            if let Spec::Variant(label, ..) = spec {
-                r.label = (*label).to_string();
+            match spec {
+                Spec::Variant(label, ..) => r.label = (*label).to_string(),
+                Spec::File(f, true) => {
+                    r.label = format!("open loop, {} physics", f.name());
+                    r.motion = "walk";
+                }
+                Spec::File(_, false) => {}
             }
             run.push(r);
         }
@@ -679,7 +704,12 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
     // The closed-loop walk's speed as a share of the open loop's, measured in
     // the same rounds at the default settings.
     let (closed_share, closed_spread) = share(closed, headline, &cpu_rtf);
-    let files: Vec<(&FileWalk, usize)> = FILES.iter().zip(first_file..).collect();
+    // Each file with its walk's measurement and its open-loop twin's.
+    let files: Vec<(&FileWalk, usize, usize)> = FILES
+        .iter()
+        .zip((first_file..).step_by(2))
+        .map(|(f, i)| (f, i, i + 1))
+        .collect();
     let converged = files[0].1;
     // What a physics step costs there against the default's: about the same,
     // so the converged walk's share follows its steps per cycle (docs/walk.md,
@@ -702,24 +732,32 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             "converged_steps_per_second_share": converged_step_share,
             "rows": rows.iter().zip(&cpu).map(|(r, c)| serde_json::json!({
                 "settings": r.label,
+                "file": r.file,
                 "motion": r.motion,
                 "substeps": r.settings.substeps,
                 "substeps_max": r.settings.substeps_max,
                 "solver_iterations": r.settings.solver_iterations,
                 "pgs_iterations": r.settings.pgs_iterations,
                 "weld_upper_body": r.settings.weld_upper_body,
+                "weld_head": r.settings.weld_head,
+                "contact_hz": r.settings.contact_hz,
+                "firm_stops": r.settings.firm_stops,
                 "realtime_factor": rtf(r),
                 "cpu_realtime_factor": c,
                 "steps_per_second": sps(r),
                 "fell": r.fell,
             })).collect::<Vec<_>>(),
         });
-        for (f, i) in &files {
+        for (f, i, t) in &files {
             let (of_open, spread) = share(*i, open_loop, &cpu_rtf);
+            let (of_twin, twin_spread) = share(*i, *t, &cpu_rtf);
             v[format!("{}_realtime_factor", f.key)] = rtf(rows[*i]).into();
             v[format!("{}_cpu_realtime_factor", f.key)] = cpu[*i].into();
             v[format!("{}_share_of_open_loop", f.key)] = of_open.into();
             v[format!("{}_share_spread", f.key)] = serde_json::json!([spread.0, spread.1]);
+            v[format!("{}_share_of_open_loop_on_its_physics", f.key)] = of_twin.into();
+            v[format!("{}_share_on_its_physics_spread", f.key)] =
+                serde_json::json!([twin_spread.0, twin_spread.1]);
         }
         outln!("{v}");
     } else {
@@ -756,16 +794,20 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             100.0 * closed_spread.0,
             100.0 * closed_spread.1
         );
-        for (f, i) in &files {
+        for (f, i, t) in &files {
             let (of_open, spread) = share(*i, open_loop, &cpu_rtf);
+            let (of_twin, twin_spread) = share(*i, *t, &cpu_rtf);
             outln!(
-                "closed-loop walk of the {} experiment: {:.1}x real time ({:.1}x by CPU), {:.0} % of the open loop's at the default ({:.0}–{:.0} %)",
+                "closed-loop walk of the {} experiment: {:.1}x real time ({:.1}x by CPU), {:.0} % of the open loop's at the default ({:.0}–{:.0} %), {:.0} % of the open loop's on its physics ({:.0}–{:.0} %)",
                 f.name(),
                 rtf(rows[*i]),
                 cpu[*i],
                 100.0 * of_open,
                 100.0 * spread.0,
-                100.0 * spread.1
+                100.0 * spread.1,
+                100.0 * of_twin,
+                100.0 * twin_spread.0,
+                100.0 * twin_spread.1
             );
             if f.key == "converged" {
                 outln!(

@@ -343,6 +343,18 @@ pub fn planned_step_m(
     Ok(gait.step_length())
 }
 
+/// The physics a walk of these constants runs on: `settings`, with the arms
+/// free of the torso where the walk swings them (they must move; the head
+/// stays welded, as in every other trial).
+#[must_use]
+pub fn walk_settings(mut settings: SimSettings, gait: &GaitConfig) -> SimSettings {
+    if gait.arm_swing_rad != 0.0 {
+        settings.weld_upper_body = false;
+        settings.weld_head = true;
+    }
+    settings
+}
+
 /// Runs one trial of parameter set `params` (named; unset ones at expert).
 pub fn run(
     robot_type: u8,
@@ -383,12 +395,7 @@ pub fn run_observed(
     let walk: WalkParams = params.walk();
     let cfg = engine.gait.with_params(params);
     let gait = Gait::with_config(&model, walk, duration_s, cfg);
-    if cfg.arm_swing_rad != 0.0 {
-        // Swinging arms must move: not welded to the torso (the head
-        // stays welded, as in every other trial).
-        settings.weld_upper_body = false;
-        settings.weld_head = true;
-    }
+    let mut settings = walk_settings(settings, &cfg);
     let mut balance = engine
         .feedback
         .map(|gains| Balance::new(gains.with_params(params)));
