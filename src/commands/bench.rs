@@ -652,10 +652,7 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             };
             match spec {
                 Spec::Variant(label, ..) => r.label = (*label).to_string(),
-                Spec::File(f, true) => {
-                    r.label = format!("open loop, {} physics", f.name());
-                    r.motion = "walk";
-                }
+                Spec::File(f, true) => r.label = format!("open loop, {} physics", f.name()),
                 Spec::File(_, false) => {}
             }
             run.push(r);
