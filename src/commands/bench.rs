@@ -629,9 +629,11 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
         }
     }
     // Each file's walk, then at once its open-loop twin, so that the two
-    // meet the same spell of a shared machine.
-    let first_file = specs.len();
+    // meet the same spell of a shared machine; each file with the indices
+    // of the two measurements.
+    let mut files: Vec<(&FileWalk, usize, usize)> = Vec::new();
     for f in &FILES {
+        files.push((f, specs.len(), specs.len() + 1));
         specs.push(Spec::File(f, false));
         specs.push(Spec::File(f, true));
     }
@@ -701,12 +703,6 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
     // The closed-loop walk's speed as a share of the open loop's, measured in
     // the same rounds at the default settings.
     let (closed_share, closed_spread) = share(closed, headline, &cpu_rtf);
-    // Each file with its walk's measurement and its open-loop twin's.
-    let files: Vec<(&FileWalk, usize, usize)> = FILES
-        .iter()
-        .zip((first_file..).step_by(2))
-        .map(|(f, i)| (f, i, i + 1))
-        .collect();
     let converged = files[0].1;
     // What a physics step costs there against the default's: about the same,
     // so the converged walk's share follows its steps per cycle (docs/walk.md,
