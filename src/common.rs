@@ -28,15 +28,36 @@ pub fn emit(text: &str) -> Result<(), Failure> {
     Ok(())
 }
 
+/// The most an experiment file may hold. The shipped files are 1–4 KiB; a
+/// bound keeps `check /dev/zero` (or a mistyped path to a data file) from
+/// reading without end.
+const MAX_EXPERIMENT_BYTES: u64 = 1 << 20;
+
 /// Reads and validates an experiment file (a usage error when it is bad).
 pub fn load_experiment(path: &Path) -> Result<(Experiment, String), Failure> {
-    let text = std::fs::read_to_string(path)
+    let text = read_bounded(path, MAX_EXPERIMENT_BYTES)
         .with_context(|| format!("cannot read {}", path.display()))
         .map_err(Failure::Usage)?;
     let e = Experiment::from_toml(&text)
         .with_context(|| format!("{}", path.display()))
         .map_err(Failure::Usage)?;
     Ok((e, text))
+}
+
+/// Reads a UTF-8 text file of at most `max` bytes; a longer one is an error
+/// that says so, read no further than `max + 1` bytes.
+fn read_bounded(path: &Path, max: u64) -> anyhow::Result<String> {
+    use std::io::Read;
+    let file = std::fs::File::open(path)?;
+    if file.metadata()?.is_dir() {
+        anyhow::bail!("it is a directory");
+    }
+    let mut bytes = Vec::new();
+    file.take(max + 1).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > max {
+        anyhow::bail!("it holds more than {max} bytes; an experiment file is a few KiB");
+    }
+    String::from_utf8(bytes).map_err(|_| anyhow::anyhow!("it is not UTF-8 text"))
 }
 
 /// Where a NAO experiment's start replaces the body of robot type

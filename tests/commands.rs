@@ -259,12 +259,19 @@ fn malformed_experiments_exit_2_naming_the_problem() {
         assert_eq!(out.status.code(), Some(2), "{to}: {err}");
         assert!(err.contains(needle), "{to}: {err}");
     }
-    let out = naofarm()
-        .arg("check")
-        .arg(dir.join("missing.toml"))
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(2));
+    std::fs::write(dir.join("binary.toml"), [0xff, 0xfe, 0x00, 0x80]).unwrap();
+    for (path, needle) in [
+        (dir.join("missing.toml"), "No such file"),
+        (dir.to_path_buf(), "is a directory"),
+        (dir.join("binary.toml"), "not UTF-8"),
+        // Endless input is read no further than the bound.
+        ("/dev/zero".into(), "more than 1048576 bytes"),
+    ] {
+        let out = naofarm().arg("check").arg(&path).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{}: {err}", path.display());
+        assert!(err.contains(needle), "{}: {err}", path.display());
+    }
 }
 
 #[test]
