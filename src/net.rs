@@ -46,6 +46,12 @@ impl NetArgs {
                 c
             }
         };
+        for e in &self.listen {
+            check_endpoint("--listen", e, true)?;
+        }
+        for e in &self.connect {
+            check_endpoint("--connect", e, false)?;
+        }
         if !self.listen.is_empty() {
             cfg.insert_json5("listen/endpoints", &json_list(&self.listen))
                 .map_err(|e| anyhow::anyhow!("--listen: {e}"))?;
@@ -113,6 +119,57 @@ impl NetArgs {
     }
 }
 
+/// The link protocols this build of zenoh has (Cargo.toml's features).
+const PROTOCOLS: [&str; 3] = ["tcp", "tls", "udp"];
+
+/// Checks one endpoint of `flag` before zenoh sees it, so that a typo is a
+/// usage error naming it, not a session that waits for ever on an address
+/// nothing can answer: zenoh's syntax, a protocol this build has, and
+/// HOST:PORT with an IPv4 address, a bracketed IPv6 one or a host name, and
+/// a port in 1..=65535 (0 too when listening: the system picks one).
+fn check_endpoint(flag: &str, e: &str, listening: bool) -> anyhow::Result<()> {
+    let bad = |why: &str| {
+        anyhow::anyhow!(
+            "{flag} `{e}`: {why}; an endpoint is PROTOCOL/HOST:PORT, e.g. tcp/10.0.0.5:7447"
+        )
+    };
+    let endpoint: zenoh::config::EndPoint = e.parse().map_err(|_| bad("not a zenoh endpoint"))?;
+    let protocol = endpoint.protocol();
+    if !PROTOCOLS.contains(&protocol.as_str()) {
+        return Err(bad(&format!(
+            "`{}` is not a protocol naofarm speaks ({})",
+            protocol.as_str(),
+            PROTOCOLS.join(", ")
+        )));
+    }
+    let address = endpoint.address();
+    let (host, port) = address
+        .as_str()
+        .rsplit_once(':')
+        .ok_or_else(|| bad("no port"))?;
+    match port.parse::<u16>() {
+        Ok(0) if !listening => return Err(bad("port 0 cannot be connected to")),
+        Ok(_) => {}
+        Err(_) => return Err(bad(&format!("port `{port}` is not in 0..=65535"))),
+    }
+    let host_ok = if let Some(inner) = host.strip_prefix('[') {
+        inner
+            .strip_suffix(']')
+            .is_some_and(|ip| ip.parse::<std::net::Ipv6Addr>().is_ok())
+    } else if host.chars().all(|c| c.is_ascii_digit() || c == '.') {
+        host.parse::<std::net::Ipv4Addr>().is_ok()
+    } else {
+        host.split('.').all(|label| {
+            !label.is_empty() && label.chars().all(|c| c.is_ascii_alphanumeric() || c == '-')
+        })
+    };
+    if host_ok {
+        Ok(())
+    } else {
+        Err(bad(&format!("`{host}` is no IP address or host name")))
+    }
+}
+
 /// Where `watch` and `ctl` connect when no endpoint or file is given: a
 /// coordinator's default listener on this host (over TLS with `--tls`).
 #[must_use]
@@ -121,11 +178,44 @@ pub fn default_connect(tls: bool) -> String {
     format!("{scheme}/127.0.0.1:7447")
 }
 
-/// Opens a zenoh session (the one place every command does).
-pub async fn open_session(cfg: zenoh::Config) -> Result<zenoh::Session, crate::common::Failure> {
-    zenoh::open(cfg)
+/// How long a connecting session may go without reaching the other end
+/// before its command says what it waits for.
+const WAIT_NOTICE: std::time::Duration = std::time::Duration::from_secs(3);
+
+/// Opens a zenoh session (the one place every command does). A session
+/// that connects waits in zenoh's open for the other end to come up (a
+/// router or coordinator started later); when that takes longer than
+/// [`WAIT_NOTICE`], `ROLE: waiting for ENDPOINTS …` on stderr says so, and
+/// `ROLE: connected to ENDPOINTS` once it is there, instead of a silent
+/// wait.
+pub async fn open_session(
+    cfg: zenoh::Config,
+    role: &str,
+    connect: &[String],
+) -> Result<zenoh::Session, crate::common::Failure> {
+    // A thread of its own: zenoh's open may hold the runtime's threads.
+    let (opened, notice) = std::sync::mpsc::channel::<()>();
+    if !connect.is_empty() {
+        let (role, connect) = (role.to_string(), connect.join(", "));
+        std::thread::spawn(move || {
+            if let Err(std::sync::mpsc::RecvTimeoutError::Timeout) =
+                notice.recv_timeout(WAIT_NOTICE)
+            {
+                eprintln!(
+                    "{role}: waiting for {connect}: nothing answers there yet (start a router or coordinator there, or check the endpoint); still trying"
+                );
+                if notice.recv().is_ok() {
+                    eprintln!("{role}: connected to {connect}");
+                }
+            }
+        });
+    }
+    let session = zenoh::open(cfg)
         .await
-        .map_err(|e| crate::common::Failure::Job(anyhow::anyhow!("zenoh: {e}")))
+        .map_err(|e| crate::common::Failure::Job(anyhow::anyhow!("zenoh: {e}")))?;
+    // The notice thread may have ended already (no notice to give).
+    let _ = opened.send(());
+    Ok(session)
 }
 
 /// Prints the endpoints a session really listens on (a `:0` port resolved):

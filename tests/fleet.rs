@@ -1178,3 +1178,66 @@ fn a_worker_gives_back_at_once_the_trials_it_cannot_read() {
     assert_eq!(f["failures"], 0, "{f}");
     assert!(c.stderr().contains("a worker gave a trial back"));
 }
+
+/// A worker started before its router says, after a while, what it waits
+/// for and then that it got there; a mistyped endpoint is a usage error
+/// that names it, never a session that waits for ever on it.
+#[test]
+fn a_worker_says_what_it_waits_for_and_a_mistyped_endpoint_is_refused() {
+    let dir = scratch("wait");
+    // A port the OS gives, let go for the router that comes later.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let ep = format!("tcp/127.0.0.1:{port}");
+    let w = worker(&dir, &ep, 1, 0, &[]);
+    wait_line(
+        &w,
+        &format!("worker: waiting for {ep}: nothing answers there yet"),
+    );
+    assert!(!w.stderr().contains("connected to"), "{}", w.stderr());
+    let _router = Proc::spawn(
+        naofarm()
+            .args(["router", "--listen", &ep])
+            .stdout(Stdio::null()),
+        &dir,
+        "router",
+    );
+    wait_line(&w, &format!("worker: connected to {ep}"));
+
+    for (bad, why) in [
+        ("garbage", "not a zenoh endpoint"),
+        (
+            "quic/127.0.0.1:7447",
+            "`quic` is not a protocol naofarm speaks",
+        ),
+        ("tcp/127.0.0.1", "no port"),
+        ("tcp/127.0.0.1:74470", "port `74470` is not in 0..=65535"),
+        ("tcp/127.0.0.1:0", "port 0 cannot be connected to"),
+        ("tcp/127.0.0.300:7447", "`127.0.0.300` is no IP address"),
+        ("tcp/[::g]:7447", "`[::g]` is no IP address"),
+        (
+            "tcp/my_host:7447",
+            "`my_host` is no IP address or host name",
+        ),
+    ] {
+        let err = fails(naofarm().args(["worker", "--connect", bad]), 2);
+        assert!(
+            err.contains(&format!("--connect `{bad}`: {why}")),
+            "{bad}: {err}"
+        );
+    }
+    let exp = experiment(&dir, "e.toml", "wait", 1, 2);
+    let err = fails(
+        naofarm()
+            .arg("coordinator")
+            .arg(&exp)
+            .arg("--out")
+            .arg(dir.join("run"))
+            .args(["--listen", "tcp/localhost"]),
+        2,
+    );
+    assert!(err.contains("--listen `tcp/localhost`: no port"), "{err}");
+}

@@ -26,9 +26,9 @@ pub fn coordinator(job: &JobArgs, net: &NetArgs, json: bool) -> Result<(), Failu
     // waits; one tokio worker for what the runtime needs beside it.
     // `NAOFARM_COORD_OWN_THREAD=1` serves on this thread instead, to measure.
     let rt = runtime_with(1)?;
-    let (job, prefix) = (job.clone(), net.prefix.clone());
+    let (job, prefix, connect) = (job.clone(), net.prefix.clone(), net.connect.clone());
     let serve = async move {
-        let session = open_session(cfg).await?;
+        let session = open_session(cfg, "coordinator", &connect).await?;
         crate::net::say_endpoints(&session, "coordinator").await;
         let shutdown = signals();
         let served = serve_with_view(&session, (run, effects), &job, &prefix, shutdown, json).await;

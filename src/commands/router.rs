@@ -26,7 +26,7 @@ pub fn router(
         .map_err(|e| Failure::Usage(anyhow!("mode: {e}")))?;
     let rt = runtime()?;
     rt.block_on(async {
-        let session = open_session(cfg).await?;
+        let session = open_session(cfg, "router", &net.connect).await?;
         // The endpoints really bound (a `:0` port resolved), for scripts and tests.
         crate::net::say_endpoints(&session, "router").await;
         eprintln!("router ready (zid {})", session.zid());

@@ -57,7 +57,7 @@ pub fn run(
     let (run, effects) = open_run(job)?;
     let rt = runtime()?;
     rt.block_on(async {
-        let session = open_session(ccfg).await?;
+        let session = open_session(ccfg, "coordinator", &coord_net.connect).await?;
         let endpoint = session
             .info()
             .locators()
@@ -84,7 +84,7 @@ pub fn run(
         let mut worker_sessions = Vec::new();
         for _ in 0..n {
             let wcfg = worker_net.zenoh_config("worker", &[]).map_err(Failure::Job)?;
-            let ws = open_session(wcfg).await?;
+            let ws = open_session(wcfg, "worker", &worker_net.connect).await?;
             worker_sessions.push(ws.clone());
             let cfg = worker::service::WorkerConfig {
                 slots: 1,

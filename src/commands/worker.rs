@@ -60,7 +60,7 @@ pub fn worker(
     }
     let rt = runtime()?;
     let done = rt.block_on(async {
-        let session = open_session(cfg).await?;
+        let session = open_session(cfg, "worker", &net.connect).await?;
         let shutdown = signals();
         let s = worker::service::serve(session.clone(), wcfg, shutdown)
             .await
