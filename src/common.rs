@@ -44,6 +44,20 @@ pub fn load_experiment(path: &Path) -> Result<(Experiment, String), Failure> {
     Ok((e, text))
 }
 
+/// Makes the output directory `dir` given by `what` (e.g. `--out`) unless
+/// it is there: a file or a device already at that path is a usage error
+/// that names it, and is left as it is.
+pub fn make_dir(dir: &Path, what: &str) -> Result<(), Failure> {
+    if dir.exists() && !dir.is_dir() {
+        return Err(Failure::Usage(anyhow::anyhow!(
+            "{what} {}: exists and is not a directory",
+            dir.display()
+        )));
+    }
+    std::fs::create_dir_all(dir)
+        .map_err(|e| Failure::Job(anyhow::anyhow!("{what} {}: {e}", dir.display())))
+}
+
 /// Reads a UTF-8 text file of at most `max` bytes; a longer one is an error
 /// that says so, read no further than `max + 1` bytes.
 fn read_bounded(path: &Path, max: u64) -> anyhow::Result<String> {

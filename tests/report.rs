@@ -259,6 +259,22 @@ fn report_writes_every_figure_and_table_iv_and_leaves_the_run_as_it_was() {
         2,
     );
     assert!(e.contains("--trials"), "{e}");
+    // A file where the report would go is named and kept.
+    let notes = dir.join("notes.txt");
+    std::fs::write(&notes, "someone's notes").unwrap();
+    let e = fails(
+        naofarm()
+            .arg("report")
+            .arg(dir.join("run"))
+            .arg("--out")
+            .arg(&notes),
+        2,
+    );
+    assert!(e.contains("exists and is not a directory"), "{e}");
+    assert_eq!(std::fs::read_to_string(&notes).unwrap(), "someone's notes");
+    let e = fails(naofarm().arg("certs").arg(&notes).args(["--host", "x"]), 2);
+    assert!(e.contains("exists and is not a directory"), "{e}");
+    assert_eq!(std::fs::read_to_string(&notes).unwrap(), "someone's notes");
 }
 
 /// A browser the test can drive: `$NAOFARM_CHROMIUM`, else Debian's.

@@ -33,6 +33,9 @@ pub enum LockError {
         /// "pid N on host H", as the holder wrote it.
         holder: String,
     },
+    /// The run directory's path names something else: a file, a device.
+    #[error("{0} exists and is not a directory; a run directory is made where nothing is")]
+    NotADirectory(PathBuf),
     /// File-system error.
     #[error("{path}: {cause}")]
     Io {
@@ -60,6 +63,9 @@ impl RunLock {
             path: path.clone(),
             cause,
         };
+        if dir.exists() && !dir.is_dir() {
+            return Err(LockError::NotADirectory(dir.to_path_buf()));
+        }
         std::fs::create_dir_all(dir).map_err(io)?;
         let mut file = OpenOptions::new()
             .read(true)
@@ -121,5 +127,17 @@ mod tests {
         drop(a);
         assert!(!RunLock::is_held(&d));
         let _b = RunLock::acquire(&d).unwrap();
+    }
+
+    #[test]
+    fn a_file_where_the_run_directory_goes_is_refused_and_kept() {
+        let d = crate::test_dir::test_dir("lock-file");
+        std::fs::create_dir_all(&*d).unwrap();
+        let file = d.join("notes.txt");
+        std::fs::write(&file, b"someone's notes").unwrap();
+        let e = RunLock::acquire(&file).unwrap_err();
+        assert!(matches!(e, LockError::NotADirectory(_)), "{e}");
+        assert!(e.to_string().contains("is not a directory"), "{e}");
+        assert_eq!(std::fs::read(&file).unwrap(), b"someone's notes");
     }
 }

@@ -103,7 +103,7 @@ pub fn certs(
         }
         wanted.push((role.to_string(), name.to_string()));
     }
-    std::fs::create_dir_all(dir).map_err(|e| Failure::Job(anyhow!("{}: {e}", dir.display())))?;
+    crate::common::make_dir(dir, "certificate directory")?;
     let (ca_pem, ca_key) = (dir.join("ca.pem"), dir.join("ca.key"));
     // The CA: reused when it is there (it signs the new certificates), made otherwise.
     let ca_key_pair = if ca_key.exists() && !force {

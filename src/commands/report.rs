@@ -105,8 +105,7 @@ fn one(
     let exp = view.experiment.clone();
     let decided = &view.decided;
     let out = out.map_or_else(|| dir.join("report"), Path::to_path_buf);
-    std::fs::create_dir_all(&out)
-        .map_err(|e| Failure::Usage(anyhow!("--out {}: {e}", out.display())))?;
+    crate::common::make_dir(&out, "--out")?;
     let write = |name: &str, text: &str| {
         std::fs::write(out.join(name), text)
             .map_err(|e| Failure::Job(anyhow!("{}: {e}", out.join(name).display())))
