@@ -128,7 +128,7 @@ fn a_failing_evaluator_is_a_clear_error_and_its_games_stay_in_the_log() {
         (
             "dies.sh",
             "#!/bin/sh\nread l; echo L; read l; echo W; read l; exit 3\n",
-            "exited",
+            "the evaluator exited (exit status: 3) without answering game 2",
             2,
         ),
         ("hangs.sh", "#!/bin/sh\nread l; echo W; read l; sleep 60\n", "within 1 s", 1),
@@ -155,6 +155,8 @@ fn a_failing_evaluator_is_a_clear_error_and_its_games_stay_in_the_log() {
         assert_eq!(out.status.code(), Some(1), "{name}");
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(err.contains(message), "{name}: {err}");
+        // The error alone: no noise from ending an evaluator already gone.
+        assert_eq!(err.trim().lines().count(), 1, "{name}: {err}");
         let lines = std::fs::read_to_string(&log).unwrap().lines().count();
         assert_eq!(lines, 1 + kept, "{name}: the games played are kept");
     }

@@ -253,6 +253,8 @@ fn kill_group(child: &mut Child) {
     {
         let _ = Command::new("kill")
             .args(["-KILL", "--", &format!("-{}", child.id())])
+            // A group that has ended already is no news.
+            .stderr(std::process::Stdio::null())
             .status();
     }
     let _ = child.kill();
@@ -334,8 +336,10 @@ impl Evaluator {
                         )
                     }
                     Err(mpsc::RecvTimeoutError::Disconnected) => {
-                        let status = child.wait().ok();
-                        bail!("the evaluator exited ({status:?}) without answering game {game}")
+                        let status = child
+                            .wait()
+                            .map_or_else(|e| format!("its status unknown: {e}"), |s| s.to_string());
+                        bail!("the evaluator exited ({status}) without answering game {game}")
                     }
                 }
             }
