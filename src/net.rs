@@ -32,7 +32,7 @@ impl NetArgs {
         protocol::keys::check_chunk("prefix", &self.prefix).map_err(anyhow::Error::msg)?;
         let mut cfg = match &self.config {
             Some(p) => zenoh::Config::from_file(p)
-                .map_err(|e| anyhow::anyhow!("{e}"))
+                .map_err(|e| anyhow::anyhow!("{}", zenoh_error(&e)))
                 .with_context(|| format!("zenoh config {}", p.display()))?,
             None => {
                 let mut c = zenoh::Config::default();
@@ -212,7 +212,7 @@ pub async fn open_session(
     }
     let session = zenoh::open(cfg)
         .await
-        .map_err(|e| crate::common::Failure::Job(anyhow::anyhow!("zenoh: {e}")))?;
+        .map_err(|e| crate::common::Failure::Job(anyhow::anyhow!("zenoh: {}", zenoh_error(&e))))?;
     // The notice thread may have ended already (no notice to give).
     let _ = opened.send(());
     Ok(session)
@@ -234,10 +234,38 @@ pub async fn open_asking(
 ) -> Result<zenoh::Session, crate::common::Failure> {
     zenoh::open(cfg).await.map_err(|e| {
         crate::common::Failure::Job(anyhow::anyhow!(
-            "nothing answers at {}: no coordinator or router listens there, so the run is finished or unknown ({e})",
-            connect.join(", ")
+            "nothing answers at {}: no coordinator or router listens there, so the run is finished or unknown ({})",
+            connect.join(", "),
+            zenoh_error(&e)
         ))
     })
+}
+
+/// A zenoh error as a user reads it: without the places in zenoh's own
+/// source that its messages carry (` at /…/src/unicast.rs:338.`).
+fn zenoh_error(e: &dyn std::fmt::Display) -> String {
+    let text = e.to_string();
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text.as_str();
+    while let Some(i) = rest.find(" at /") {
+        out.push_str(&rest[..i]);
+        let after = &rest[i + 4..];
+        let end = after.find(char::is_whitespace).unwrap_or(after.len());
+        let place = after[..end].trim_end_matches(['.', ']', ')']);
+        let is_source = place
+            .rsplit_once(".rs:")
+            .is_some_and(|(_, line)| !line.is_empty() && line.bytes().all(|b| b.is_ascii_digit()));
+        if is_source {
+            // Keep what closed around the place (`]`, `)`), not its full stop.
+            let tail = &after[place.len()..end];
+            out.push_str(tail.trim_start_matches('.'));
+        } else {
+            out.push_str(&rest[i..i + 4 + end]);
+        }
+        rest = &after[end..];
+    }
+    out.push_str(rest);
+    out
 }
 
 /// Mutual TLS for a session of `role` with the certificates in `dir`
@@ -358,4 +386,21 @@ pub fn acl(prefix: &str) -> String {
         "policies": policy_json,
     })
     .to_string()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::zenoh_error;
+
+    #[test]
+    fn zenohs_source_places_are_left_out_of_its_messages() {
+        let e = "Can not create a new TCP listener bound to tcp/8.8.8.8:7447: [8.8.8.8:7447: Cannot assign requested address (os error 99) at /root/.cargo/registry/src/index.crates.io-1949cf8c6b5b557f/zenoh-link-commons-1.10.2/src/tcp.rs:61.] at /root/.cargo/registry/src/zenoh-link-tcp-1.10.2/src/unicast.rs:338.";
+        assert_eq!(
+            zenoh_error(&e),
+            "Can not create a new TCP listener bound to tcp/8.8.8.8:7447: [8.8.8.8:7447: Cannot assign requested address (os error 99)]"
+        );
+        // A path that is no source place stays.
+        let e = "cannot read the file at /etc/zenoh.json5: denied";
+        assert_eq!(zenoh_error(&e), e);
+    }
 }
