@@ -115,6 +115,18 @@ fn a_flipped_length_bit_is_refused_everywhere_and_salvage_recovers_the_run() {
         "salvage only reads"
     );
     succeed(naofarm().args(["journal", "check"]).arg(&salvaged));
+    // Salvaging onto a run is refused, the run kept as it was.
+    let before = std::fs::read(journal(&salvaged)).unwrap();
+    let err = fails(
+        naofarm()
+            .args(["journal", "salvage"])
+            .arg(&damaged_dir)
+            .arg("--out")
+            .arg(&salvaged),
+        2,
+    );
+    assert!(err.contains("already holds a journal"), "{err}");
+    assert_eq!(std::fs::read(journal(&salvaged)).unwrap(), before);
     succeed(&mut run(&salvaged, 12));
     assert_eq!(
         history(&salvaged),

@@ -49,6 +49,9 @@ pub enum RunError {
         /// What differs.
         why: String,
     },
+    /// `salvage`'s new run directory holds a journal already.
+    #[error("{0} already holds a journal; salvage writes into a new --out directory")]
+    SalvageOntoJournal(String),
     /// Replaying the journal disagrees with what this build computes.
     #[error("{dir}: journal replay diverges at iteration {iteration}: {why}")]
     Diverged {
@@ -969,10 +972,7 @@ pub fn salvage(dir: &Path, out: &Path) -> Result<Salvaged, RunError> {
         _ => String::new(),
     };
     if Journal::path_in(out).exists() {
-        return Err(RunError::OtherExperiment {
-            dir: out.display().to_string(),
-            why: "it already holds a journal; salvage writes into a new directory".into(),
-        });
+        return Err(RunError::SalvageOntoJournal(out.display().to_string()));
     }
     let (mut run, _) = Run::open(out, exp, &text, Some(imported))?;
     let mut pending: Vec<(u64, u32, u64, Measurement, String)> = records

@@ -26,7 +26,9 @@ pub fn journal(cmd: JournalCommand) -> Result<(), Failure> {
                 )));
             }
             let s = salvage(&dir, &out).map_err(|e| match e {
-                RunError::OtherExperiment { .. } | RunError::Locked(_) => Failure::Usage(e.into()),
+                RunError::OtherExperiment { .. }
+                | RunError::SalvageOntoJournal(_)
+                | RunError::Locked(_) => Failure::Usage(e.into()),
                 e => Failure::Job(e.into()),
             })?;
             let spans: Vec<String> = s
