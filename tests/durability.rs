@@ -100,13 +100,15 @@ fn a_flipped_length_bit_is_refused_everywhere_and_salvage_recovers_the_run() {
     );
 
     let salvaged = dir.join("salvaged");
-    let out = succeed(
-        naofarm()
-            .args(["journal", "salvage"])
+    let salvage = || {
+        let mut cmd = naofarm();
+        cmd.args(["journal", "salvage"])
             .arg(&damaged_dir)
             .arg("--out")
-            .arg(&salvaged),
-    );
+            .arg(&salvaged);
+        cmd
+    };
+    let out = succeed(&mut salvage());
     let said = String::from_utf8_lossy(&out.stdout);
     assert!(said.contains(&format!("at offset {third}")), "{said}");
     assert_eq!(
@@ -117,14 +119,7 @@ fn a_flipped_length_bit_is_refused_everywhere_and_salvage_recovers_the_run() {
     succeed(naofarm().args(["journal", "check"]).arg(&salvaged));
     // Salvaging onto a run is refused, the run kept as it was.
     let before = std::fs::read(journal(&salvaged)).unwrap();
-    let err = fails(
-        naofarm()
-            .args(["journal", "salvage"])
-            .arg(&damaged_dir)
-            .arg("--out")
-            .arg(&salvaged),
-        2,
-    );
+    let err = fails(&mut salvage(), 2);
     assert!(err.contains("already holds a journal"), "{err}");
     assert_eq!(std::fs::read(journal(&salvaged)).unwrap(), before);
     succeed(&mut run(&salvaged, 12));
