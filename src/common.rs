@@ -179,9 +179,28 @@ pub fn note_tail(dir: &Path, view: &coordinator::run::RunView) {
     }
 }
 
+/// What is wrong with `dir` as a run directory, naming it, when it is none:
+/// missing, a file, or a directory without a journal (a usage error).
+pub fn not_a_run(dir: &Path) -> Option<String> {
+    let journal = coordinator::journal::Journal::path_in(dir);
+    let why = if !dir.exists() {
+        "does not exist"
+    } else if !dir.is_dir() {
+        "is a file, not a run directory"
+    } else if !journal.exists() {
+        "is not a run directory: it holds no journal.nfj"
+    } else {
+        return None;
+    };
+    Some(format!("{}: {why}", dir.display()))
+}
+
 /// Reads the run in `dir` for a command that only reads it: a journal that
 /// cannot be opened is a usage error (exit 2), a damaged one a failed job.
 pub fn read_run(dir: &Path) -> Result<coordinator::run::RunView, Failure> {
+    if let Some(why) = not_a_run(dir) {
+        return Err(Failure::Usage(anyhow::Error::msg(why)));
+    }
     coordinator::run::read_run(dir).map_err(|e| match e {
         coordinator::run::RunError::Journal(coordinator::journal::JournalError::Io { .. }) => {
             Failure::Usage(e.into())

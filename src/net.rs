@@ -265,7 +265,64 @@ fn zenoh_error(e: &dyn std::fmt::Display) -> String {
         rest = &after[end..];
     }
     out.push_str(rest);
-    out
+    serde_message(&out)
+}
+
+/// serde's debug form of a config error (`JSON error: Message { msg: "…",
+/// location: Some(Location { line: 1, column: 8 }) }`) as a sentence:
+/// `JSON error: … (line 1, column 8)`. Any other text is kept as it is.
+fn serde_message(text: &str) -> String {
+    const OPEN: &str = "Message { msg: \"";
+    let Some(start) = text.find(OPEN) else {
+        return text.to_string();
+    };
+    let body = &text[start + OPEN.len()..];
+    // The message ends at the first unescaped quote.
+    let mut msg = String::new();
+    let mut chars = body.char_indices();
+    let mut end = None;
+    while let Some((i, c)) = chars.next() {
+        match c {
+            '\\' => match chars.next() {
+                Some((_, 'n')) => msg.push(' '),
+                Some((_, e)) => msg.push(e),
+                None => break,
+            },
+            '"' => {
+                end = Some(i + 1);
+                break;
+            }
+            c => msg.push(c),
+        }
+    }
+    let Some(end) = end else {
+        return text.to_string();
+    };
+    let after = &body[end..];
+    let number = |key: &str| -> Option<u64> {
+        let from = after.find(key)? + key.len();
+        let digits: String = after[from..]
+            .chars()
+            .take_while(char::is_ascii_digit)
+            .collect();
+        digits.parse().ok()
+    };
+    let place = match (number("line: "), number("column: ")) {
+        (Some(l), Some(c)) => format!(" (line {l}, column {c})"),
+        _ => String::new(),
+    };
+    // What follows the `}` that closes `Message {`, if anything.
+    let mut depth = 1;
+    let close = after.char_indices().find_map(|(i, c)| {
+        match c {
+            '{' => depth += 1,
+            '}' => depth -= 1,
+            _ => {}
+        }
+        (depth == 0).then_some(i + 1)
+    });
+    let tail = close.map_or("", |i| &after[i..]);
+    format!("{}{msg}{place}{tail}", &text[..start])
 }
 
 /// Mutual TLS for a session of `role` with the certificates in `dir`
@@ -401,6 +458,23 @@ mod tests {
         );
         // A path that is no source place stays.
         let e = "cannot read the file at /etc/zenoh.json5: denied";
+        assert_eq!(zenoh_error(&e), e);
+    }
+
+    #[test]
+    fn serdes_debug_form_is_a_sentence() {
+        let e = r#"JSON error: Message { msg: "invalid type: integer `3`, expected either 'router', 'peer' or 'client'", location: Some(Location { line: 1, column: 8 }) }"#;
+        assert_eq!(
+            zenoh_error(&e),
+            "JSON error: invalid type: integer `3`, expected either 'router', 'peer' or 'client' (line 1, column 8)"
+        );
+        let e =
+            r#"JSON error: Message { msg: "unknown field `moed`, say \"mode\"", location: None }"#;
+        assert_eq!(
+            zenoh_error(&e),
+            r#"JSON error: unknown field `moed`, say "mode""#
+        );
+        let e = "JSON error: a Message { without its form";
         assert_eq!(zenoh_error(&e), e);
     }
 }

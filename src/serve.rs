@@ -92,6 +92,9 @@ pub fn open_run(job: &JobArgs) -> Result<(Run, Vec<coordinator::run::Effect>), F
     }
     let imported = match &job.from {
         Some(dir) => {
+            if let Some(why) = crate::common::not_a_run(dir) {
+                return Err(Failure::Usage(anyhow!("--from {why}")));
+            }
             let from = load_history(dir, &exp).map_err(|e| match e {
                 coordinator::run::RunError::FromMismatch { .. } => Failure::Usage(e.into()),
                 e => Failure::Job(anyhow!("--from {}: {e}", dir.display())),

@@ -203,7 +203,7 @@ fn extending_a_finished_run_gives_the_longer_runs_history() {
 }
 
 #[test]
-fn from_a_run_with_other_parameters_is_refused_by_name() {
+fn from_a_run_with_other_parameters_or_from_no_run_is_refused_by_name() {
     let dir = scratch("from");
     let one = dir.join("physical");
     succeed(&mut run_synthetic(
@@ -238,6 +238,31 @@ fn from_a_run_with_other_parameters_is_refused_by_name() {
             .arg(&one),
     );
     assert!(String::from_utf8_lossy(&out.stderr).contains("of its 3 points lie inside"));
+    // Something that is no run: a file, a directory without a journal, nothing.
+    let file = dir.join("notes.txt");
+    std::fs::write(&file, "not a run").unwrap();
+    let empty = dir.join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    for (from, why) in [
+        (&file, "is a file, not a run directory"),
+        (&empty, "holds no journal.nfj"),
+        (&dir.join("nowhere"), "does not exist"),
+    ] {
+        let out = dir.join("not-from");
+        let err = fails(
+            run_synthetic(root().join("experiments/physical.toml"), &out, 2)
+                .arg("--from")
+                .arg(from),
+            2,
+        );
+        assert!(
+            err.contains(&format!("--from {}: ", from.display())) && err.contains(why),
+            "{err}"
+        );
+        assert!(!out.exists(), "{err}");
+    }
+    assert_eq!(std::fs::read(&file).unwrap(), b"not a run");
+    assert_eq!(std::fs::read_dir(&empty).unwrap().count(), 0);
 }
 
 #[test]

@@ -1183,7 +1183,7 @@ fn a_worker_gives_back_at_once_the_trials_it_cannot_read() {
 /// for and then that it got there; a mistyped endpoint is a usage error
 /// that names it, never a session that waits for ever on it.
 #[test]
-fn a_worker_says_what_it_waits_for_and_a_mistyped_endpoint_is_refused() {
+fn a_worker_says_what_it_waits_for_and_a_mistyped_endpoint_or_config_is_refused() {
     let dir = scratch("wait");
     // A port the OS gives, let go for the router that comes later.
     let port = std::net::TcpListener::bind("127.0.0.1:0")
@@ -1240,4 +1240,15 @@ fn a_worker_says_what_it_waits_for_and_a_mistyped_endpoint_is_refused() {
         2,
     );
     assert!(err.contains("--listen `tcp/localhost`: no port"), "{err}");
+    // A zenoh config file with a wrong value: where, and what zenoh expected.
+    let config = dir.join("zenoh.json5");
+    std::fs::write(&config, "{mode: 3}").unwrap();
+    let err = fails(naofarm().arg("worker").arg("--config").arg(&config), 2);
+    assert!(
+        err.contains(&format!(
+            "zenoh config {}: JSON error: invalid type: integer `3`, expected either 'router', 'peer' or 'client' (line 1, column 8)",
+            config.display()
+        )) && !err.contains("Message {"),
+        "{err}"
+    );
 }

@@ -2,7 +2,6 @@
 
 use std::path::Path;
 
-use anyhow::anyhow;
 use coordinator::{
     journal::{Journal, Tail},
     run::{read_run, salvage, RunError},
@@ -10,7 +9,7 @@ use coordinator::{
 
 use crate::{
     args::JournalCommand,
-    common::{emit, Failure},
+    common::{emit, not_a_run, Failure},
 };
 
 /// Runs a journal command.
@@ -18,12 +17,8 @@ pub fn journal(cmd: JournalCommand) -> Result<(), Failure> {
     match cmd {
         JournalCommand::Check { dir, json } => check(&dir, json),
         JournalCommand::Salvage { dir, out } => {
-            if !Journal::path_in(&dir).exists() {
-                return Err(Failure::Usage(anyhow!(
-                    "{}: no journal ({})",
-                    dir.display(),
-                    Journal::path_in(&dir).display()
-                )));
+            if let Some(why) = not_a_run(&dir) {
+                return Err(Failure::Usage(anyhow::Error::msg(why)));
             }
             let s = salvage(&dir, &out).map_err(|e| match e {
                 RunError::OtherExperiment { .. }
@@ -55,10 +50,10 @@ pub fn journal(cmd: JournalCommand) -> Result<(), Failure> {
 }
 
 fn check(dir: &Path, json: bool) -> Result<(), Failure> {
-    let path = Journal::path_in(dir);
-    if !path.exists() {
-        return Err(Failure::Usage(anyhow!("{}: no journal", dir.display())));
+    if let Some(why) = not_a_run(dir) {
+        return Err(Failure::Usage(anyhow::Error::msg(why)));
     }
+    let path = Journal::path_in(dir);
     let view = read_run(dir).map_err(|e| Failure::Job(e.into()))?;
     let tail = match (&view.tail, view.live) {
         (Tail::Clean, _) => "clean".to_string(),
