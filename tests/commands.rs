@@ -321,7 +321,14 @@ fn run_completes_a_synthetic_experiment_in_one_process() {
         .output()
         .unwrap();
     assert_eq!(missing.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&missing.stderr).contains("journal"));
+    let err = String::from_utf8_lossy(&missing.stderr);
+    assert!(
+        err.contains(&format!(
+            "{}: does not exist",
+            dir.join("nowhere").display()
+        )),
+        "{err}"
+    );
 }
 
 #[test]

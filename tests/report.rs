@@ -250,7 +250,13 @@ fn report_writes_every_figure_and_table_iv_and_leaves_the_run_as_it_was() {
 
     // Bad input: no run there, no trials.
     let e = fails(naofarm().arg("report").arg(dir.join("nowhere")), 2);
-    assert!(e.contains("journal"), "{e}");
+    assert!(
+        e.contains(&format!(
+            "{}: does not exist",
+            dir.join("nowhere").display()
+        )),
+        "{e}"
+    );
     let e = fails(
         naofarm()
             .arg("report")
