@@ -1,6 +1,7 @@
 //! The vendored rapier3d's own changes beyond the release's (vendor/rapier3d/
 //! NAOFARM.md): what the release left as stubs now works. naofarm's NAO
-//! uses hinges only, so these paths are checked here on their own.
+//! uses hinges only, so these paths are checked here on their own; and the
+//! slice kernels that do nalgebra's arithmetic faster give its bits.
 
 use rapier3d::math::Vector;
 use rapier3d::prelude::*;
@@ -107,4 +108,71 @@ fn a_scalar_crosses_a_3d_vector_as_an_angular_velocity_about_z() {
     );
     let n = rapier3d::na::Vector3::new(1.0f32, 2.0, 3.0);
     assert_eq!(2.0f32.gcross(n), rapier3d::na::Vector3::new(-4.0, 2.0, 0.0));
+}
+
+/// A well-conditioned `n × n` matrix with every entry set, whose LU
+/// factorisation pivots.
+fn pivoting_matrix(n: usize) -> nalgebra::DMatrix<f32> {
+    nalgebra::DMatrix::from_fn(n, n, |i, j| {
+        let x = ((i * 7 + j * 13) % 17) as f32 / 17.0 - 0.5;
+        if i == (j + 3) % n {
+            x + n as f32
+        } else {
+            x
+        }
+    })
+}
+
+fn bits(v: &[f32]) -> Vec<u32> {
+    v.iter().map(|x| x.to_bits()).collect()
+}
+
+#[test]
+fn the_slice_kernels_give_nalgebras_bits() {
+    use rapier3d::utils::slice_blas::{axpy, lu_solve_unit, solve_upper};
+    for n in [1, 2, 7, 24, 32] {
+        let lu = nalgebra::LU::new(pivoting_matrix(n));
+        // Every column of M⁻¹, as the motor and stop rows ask for it.
+        let mut moved = 0;
+        for k in 0..n {
+            let mut theirs = nalgebra::DVector::<f32>::zeros(n);
+            theirs[k] = 1.0;
+            let mut ours = theirs.clone();
+            assert!(lu.solve_mut(&mut theirs));
+            lu_solve_unit(&lu, ours.as_mut_slice());
+            assert_eq!(
+                bits(ours.as_slice()),
+                bits(theirs.as_slice()),
+                "n {n}, column {k}"
+            );
+            let mut permuted = nalgebra::DVector::<f32>::zeros(n);
+            permuted[k] = 1.0;
+            lu.p().permute_rows(&mut permuted);
+            moved += usize::from(permuted[k] != 1.0);
+        }
+        // The matrices pivot, so the forward substitution starts elsewhere
+        // than at k for some columns.
+        assert!(n < 7 || moved > 0, "n {n}: no column was moved");
+        // A dense right-hand side through the upper triangle.
+        let u = lu.u();
+        let b = nalgebra::DVector::<f32>::from_fn(n, |i, _| (i as f32 * 0.37).sin() + 0.1);
+        let mut theirs = b.clone();
+        let mut ours = b.clone();
+        assert!(u.solve_upper_triangular_mut(&mut theirs));
+        assert!(solve_upper(&u, ours.as_mut_slice()));
+        assert_eq!(bits(ours.as_slice()), bits(theirs.as_slice()), "n {n}");
+        // And y ← a·x + y.
+        let x = nalgebra::DVector::<f32>::from_fn(n, |i, _| (i as f32 * 0.11).cos() * 1e3);
+        theirs.axpy(-0.3, &x, 1.0);
+        axpy(ours.as_mut_slice(), -0.3, x.as_slice());
+        assert_eq!(bits(ours.as_slice()), bits(theirs.as_slice()), "n {n}");
+    }
+    // A zero on the diagonal stops both solves alike.
+    let mut singular = pivoting_matrix(4).upper_triangle();
+    singular[(2, 2)] = 0.0;
+    let b = nalgebra::DVector::<f32>::from_element(4, 1.0);
+    let (mut theirs, mut ours) = (b.clone(), b);
+    assert!(!singular.solve_upper_triangular_mut(&mut theirs));
+    assert!(!solve_upper(&singular, ours.as_mut_slice()));
+    assert_eq!(bits(ours.as_slice()), bits(theirs.as_slice()));
 }

@@ -20,6 +20,8 @@ mod rotation_ops;
 #[cfg(not(target_arch = "spirv"))]
 mod scalar_type;
 mod simd_real_copy;
+#[cfg(feature = "alloc")]
+pub mod slice_blas;
 mod simd_select;
 
 pub use component_mul::ComponentMul;

@@ -50,6 +50,22 @@ fn concat_rb_mass_matrix(mass: Vector, inertia: Real) -> SMatrix<Real, SPATIAL_D
 /// `out += rhs^T * mid * rhs` where `rhs` is zero outside the columns `ranges`:
 /// the same arithmetic, entry for entry, as nalgebra's `quadform(1.0, mid, rhs,
 /// 1.0)`, without the products of zeros (whose sums leave `out` unchanged).
+/// The top-left `d × d` block of the column-major `m`, copied column by
+/// column (naofarm: the same values as `m.view((0, 0), (d, d)).into_owned()`,
+/// which copied element by element through a strided iterator).
+fn leading_block(m: &DMatrix<Real>, d: usize) -> DMatrix<Real> {
+    if d == m.nrows() && d == m.ncols() {
+        return m.clone();
+    }
+    let n = m.nrows();
+    let src = m.as_slice();
+    let mut data = Vec::with_capacity(d * d);
+    for j in 0..d {
+        data.extend_from_slice(&src[j * n..j * n + d]);
+    }
+    DMatrix::from_vec(d, d, data)
+}
+
 fn sparse_quadform(
     out: &mut DMatrix<Real>,
     mid: &SMatrix<Real, SPATIAL_DIM, SPATIAL_DIM>,
@@ -1190,16 +1206,9 @@ impl Multibody {
             .rearrange_rows(&mut self.augmented_mass, true);
 
         // TODO: avoid allocation inside LU at each timestep.
-        self.acc_inv_augmented_mass = LU::new(
-            self.acc_augmented_mass
-                .view((0, 0), (effective_dim, effective_dim))
-                .into_owned(),
-        );
-        self.inv_augmented_mass = LU::new(
-            self.augmented_mass
-                .view((0, 0), (effective_dim, effective_dim))
-                .into_owned(),
-        );
+        self.acc_inv_augmented_mass =
+            LU::new(leading_block(&self.acc_augmented_mass, effective_dim));
+        self.inv_augmented_mass = LU::new(leading_block(&self.augmented_mass, effective_dim));
     }
 
     /// Per-DoF inverse joint-space inertia `diag(M⁻¹)` at the current configuration, where `M`
