@@ -47,9 +47,6 @@ fn concat_rb_mass_matrix(mass: Vector, inertia: Real) -> SMatrix<Real, SPATIAL_D
     result
 }
 
-/// `out += rhs^T * mid * rhs` where `rhs` is zero outside the columns `ranges`:
-/// the same arithmetic, entry for entry, as nalgebra's `quadform(1.0, mid, rhs,
-/// 1.0)`, without the products of zeros (whose sums leave `out` unchanged).
 /// The top-left `d × d` block of the column-major `m`, copied column by
 /// column (naofarm: the same values as `m.view((0, 0), (d, d)).into_owned()`,
 /// which copied element by element through a strided iterator).
@@ -66,6 +63,9 @@ fn leading_block(m: &DMatrix<Real>, d: usize) -> DMatrix<Real> {
     DMatrix::from_vec(d, d, data)
 }
 
+/// `out += rhs^T * mid * rhs` where `rhs` is zero outside the columns `ranges`:
+/// the same arithmetic, entry for entry, as nalgebra's `quadform(1.0, mid, rhs,
+/// 1.0)`, without the products of zeros (whose sums leave `out` unchanged).
 fn sparse_quadform(
     out: &mut DMatrix<Real>,
     mid: &SMatrix<Real, SPATIAL_DIM, SPATIAL_DIM>,
