@@ -58,7 +58,22 @@ pub fn signals() -> tokio::sync::watch::Receiver<bool> {
     rx
 }
 
-pub fn open_run(job: &JobArgs) -> Result<(Run, Vec<coordinator::run::Effect>), Failure> {
+/// A run checked and ready to open. [`prepare_run`] refuses everything a
+/// start can refuse before a byte is written; [`Prepared::open`] then makes
+/// or resumes the run directory. A coordinator opens its zenoh session in
+/// between, so an endpoint it cannot listen on leaves no run behind.
+pub struct Prepared {
+    exp: protocol::experiment::Experiment,
+    text: String,
+    imported: Option<coordinator::evolve::Imported>,
+    out: std::path::PathBuf,
+    priority: Option<protocol::wire::Control>,
+    failure_limit: usize,
+}
+
+/// Reads and checks the experiment, the flags and `--from` (exit 2 on a bad
+/// one), writing nothing.
+pub fn prepare_run(job: &JobArgs) -> Result<Prepared, Failure> {
     let (mut exp, text) = load_experiment(&job.experiment)?;
     if let Some(n) = job.iterations {
         exp.iterations = n;
@@ -90,6 +105,22 @@ pub fn open_run(job: &JobArgs) -> Result<(Run, Vec<coordinator::run::Effect>), F
             Shown(job.lease_s)
         )));
     }
+    if !(1..=100).contains(&job.max_trial_failures) {
+        return Err(Failure::Usage(anyhow!(
+            "--max-trial-failures {}: must be in 1..=100",
+            job.max_trial_failures
+        )));
+    }
+    let priority = match job.priority {
+        Some(p) => {
+            let action = protocol::wire::Control::Priority(p);
+            action
+                .check()
+                .map_err(|e| Failure::Usage(anyhow!("--priority: {e}")))?;
+            Some(action)
+        }
+        None => None,
+    };
     let imported = match &job.from {
         Some(dir) => {
             if let Some(why) = crate::common::not_a_run(dir) {
@@ -114,37 +145,56 @@ pub fn open_run(job: &JobArgs) -> Result<(Run, Vec<coordinator::run::Effect>), F
         }
         None => None,
     };
-    if !(1..=100).contains(&job.max_trial_failures) {
-        return Err(Failure::Usage(anyhow!(
-            "--max-trial-failures {}: must be in 1..=100",
-            job.max_trial_failures
-        )));
-    }
-    let mut opened = Run::open(&job.out, exp, &text, imported).map_err(|e| match e {
-        coordinator::run::RunError::OtherExperiment { .. }
-        | coordinator::run::RunError::Locked(_)
-        | coordinator::run::RunError::Diverged { .. } => Failure::Usage(e.into()),
-        e => Failure::Job(e.into()),
-    })?;
-    opened.0.set_failure_limit(job.max_trial_failures as usize);
-    if let Some(p) = job.priority {
-        let action = protocol::wire::Control::Priority(p);
-        action
-            .check()
-            .map_err(|e| Failure::Usage(anyhow!("--priority: {e}")))?;
+    Ok(Prepared {
+        exp,
+        text,
+        imported,
+        out: job.out.clone(),
+        priority,
+        failure_limit: job.max_trial_failures as usize,
+    })
+}
+
+impl Prepared {
+    /// Opens the run once `session` is open (so an endpoint that cannot be
+    /// listened on leaves no run directory behind); closes the session if
+    /// the run cannot be opened.
+    pub async fn open_beside(
+        self,
+        session: &zenoh::Session,
+    ) -> Result<(Run, Vec<coordinator::run::Effect>), Failure> {
+        let opened = self.open();
+        if opened.is_err() {
+            let _ = session.close().await;
+        }
         opened
-            .0
-            .control(action, "--priority")
-            .map_err(|e| Failure::Job(e.into()))?;
     }
-    if let Some(before) = opened.0.extended_from() {
-        eprintln!(
-            "extending {} from {before} to {} iterations",
-            job.out.display(),
-            opened.0.evolve().experiment().iterations
-        );
+
+    /// Makes the run directory and its journal, or resumes the run in it.
+    pub fn open(self) -> Result<(Run, Vec<coordinator::run::Effect>), Failure> {
+        let mut opened =
+            Run::open(&self.out, self.exp, &self.text, self.imported).map_err(|e| match e {
+                coordinator::run::RunError::OtherExperiment { .. }
+                | coordinator::run::RunError::Locked(_)
+                | coordinator::run::RunError::Diverged { .. } => Failure::Usage(e.into()),
+                e => Failure::Job(e.into()),
+            })?;
+        opened.0.set_failure_limit(self.failure_limit);
+        if let Some(action) = self.priority {
+            opened
+                .0
+                .control(action, "--priority")
+                .map_err(|e| Failure::Job(e.into()))?;
+        }
+        if let Some(before) = opened.0.extended_from() {
+            eprintln!(
+                "extending {} from {before} to {} iterations",
+                self.out.display(),
+                opened.0.evolve().experiment().iterations
+            );
+        }
+        Ok(opened)
     }
-    Ok(opened)
 }
 
 pub fn service_config(job: &JobArgs, prefix: &str) -> ServiceConfig {

@@ -1252,3 +1252,40 @@ fn a_worker_says_what_it_waits_for_and_a_mistyped_endpoint_or_config_is_refused(
         "{err}"
     );
 }
+
+#[test]
+fn a_start_that_cannot_listen_or_is_refused_leaves_no_run_behind() {
+    let dir = scratch("nolisten");
+    let exp = experiment(&dir, "e.toml", "nolisten", 1, 2);
+    // A port held by someone else: the coordinator cannot listen there.
+    let held = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let ep = format!("tcp/127.0.0.1:{}", held.local_addr().unwrap().port());
+    for (role, out) in [("coordinator", "run-c"), ("run", "run-r")] {
+        let out = dir.join(out);
+        let err = fails(
+            naofarm()
+                .arg(role)
+                .arg(&exp)
+                .arg("--out")
+                .arg(&out)
+                .args(["--listen", &ep]),
+            1,
+        );
+        assert!(err.contains("zenoh: "), "{role}: {err}");
+        assert!(!out.exists(), "{role} left {} behind: {err}", out.display());
+    }
+    // A flag refused after the experiment is read: exit 2, nothing written.
+    let out = dir.join("run-p");
+    let err = fails(
+        naofarm()
+            .arg("coordinator")
+            .arg(&exp)
+            .arg("--out")
+            .arg(&out)
+            .args(["--listen", "tcp/127.0.0.1:0", "--priority", "0"]),
+        2,
+    );
+    assert!(err.contains("--priority: "), "{err}");
+    assert!(!out.exists(), "--priority 0 left {} behind", out.display());
+    drop(held);
+}

@@ -4,7 +4,7 @@ use crate::{
     args::{JobArgs, NetArgs},
     common::Failure,
     net::open_session,
-    serve::{open_run, runtime_with, serve_with_view, signals, summary},
+    serve::{prepare_run, runtime_with, serve_with_view, signals, summary},
 };
 
 /// `naofarm coordinator`.
@@ -19,7 +19,7 @@ pub fn coordinator(job: &JobArgs, net: &NetArgs, json: bool) -> Result<(), Failu
     let cfg = net
         .zenoh_config("coordinator", default_listen)
         .map_err(Failure::Usage)?;
-    let (run, effects) = open_run(job)?;
+    let prepared = prepare_run(job)?;
     // The service runs on zenoh's application thread, which also does all of
     // the coordinator's zenoh work: a message reaches the service without
     // waking another thread (docs/fleet.md, measured). This thread only
@@ -29,6 +29,7 @@ pub fn coordinator(job: &JobArgs, net: &NetArgs, json: bool) -> Result<(), Failu
     let (job, prefix, connect) = (job.clone(), net.prefix.clone(), net.connect.clone());
     let serve = async move {
         let session = open_session(cfg, "coordinator", &connect).await?;
+        let (run, effects) = prepared.open_beside(&session).await?;
         crate::net::say_endpoints(&session, "coordinator").await;
         let shutdown = signals();
         let served = serve_with_view(&session, (run, effects), &job, &prefix, shutdown, json).await;

@@ -7,7 +7,7 @@ use crate::{
     args::{JobArgs, NetArgs},
     common::Failure,
     net::open_session,
-    serve::{open_run, runtime, serve_with_view, signals, summary},
+    serve::{prepare_run, runtime, serve_with_view, signals, summary},
 };
 
 /// `naofarm run`: coordinator and local workers in one process, over zenoh on loopback.
@@ -54,10 +54,11 @@ pub fn run(
     let ccfg = coord_net
         .zenoh_config("coordinator", &[])
         .map_err(Failure::Usage)?;
-    let (run, effects) = open_run(job)?;
+    let prepared = prepare_run(job)?;
     let rt = runtime()?;
     rt.block_on(async {
         let session = open_session(ccfg, "coordinator", &coord_net.connect).await?;
+        let (run, effects) = prepared.open_beside(&session).await?;
         let endpoint = session
             .info()
             .locators()
