@@ -129,7 +129,7 @@ fn bits(v: &[f32]) -> Vec<u32> {
 
 #[test]
 fn the_slice_kernels_give_nalgebras_bits() {
-    use rapier3d::utils::slice_blas::{axpy, lu_solve_unit, solve_upper};
+    use rapier3d::utils::slice_blas::{axpy, lu_solve, solve_upper};
     for n in [1, 2, 7, 24, 32] {
         let lu = nalgebra::LU::new(pivoting_matrix(n));
         // Every column of M⁻¹, as the motor and stop rows ask for it.
@@ -139,7 +139,7 @@ fn the_slice_kernels_give_nalgebras_bits() {
             theirs[k] = 1.0;
             let mut ours = theirs.clone();
             assert!(lu.solve_mut(&mut theirs));
-            lu_solve_unit(&lu, ours.as_mut_slice());
+            lu_solve(&lu, ours.as_mut_slice());
             assert_eq!(
                 bits(ours.as_slice()),
                 bits(theirs.as_slice()),
@@ -153,6 +153,30 @@ fn the_slice_kernels_give_nalgebras_bits() {
         // The matrices pivot, so the forward substitution starts elsewhere
         // than at k for some columns.
         assert!(n < 7 || moved > 0, "n {n}: no column was moved");
+        // A contact's row: zeros where it moves no degree of freedom (from
+        // none to all but the last), with and without a −0 among them.
+        for first in 0..n {
+            for negative_zero in [None, Some(n - 1 - first / 2)] {
+                let mut b = nalgebra::DVector::<f32>::from_fn(n, |i, _| {
+                    if i < first || i % 3 == 1 {
+                        0.0
+                    } else {
+                        (i as f32 * 0.53).sin() - 0.2
+                    }
+                });
+                if let Some(z) = negative_zero {
+                    b[z] = -0.0;
+                }
+                let (mut theirs, mut ours) = (b.clone(), b);
+                assert!(lu.solve_mut(&mut theirs));
+                lu_solve(&lu, ours.as_mut_slice());
+                assert_eq!(
+                    bits(ours.as_slice()),
+                    bits(theirs.as_slice()),
+                    "n {n}, zeros before {first}, -0 at {negative_zero:?}"
+                );
+            }
+        }
         // A dense right-hand side through the upper triangle.
         let u = lu.u();
         let b = nalgebra::DVector::<f32>::from_fn(n, |i, _| (i as f32 * 0.37).sin() + 0.1);

@@ -57,16 +57,29 @@ pub fn solve_unit_lower_from(m: &DMatrix<Real>, b: &mut [Real], first: usize) {
     }
 }
 
-/// Overwrites `b`, a unit vector `eₖ`, with `M⁻¹ eₖ` through `lu`: the bits
-/// of `lu.solve_mut(b)`, the forward substitution started at the row the
-/// permutation moves the 1 to.
-pub fn lu_solve_unit(lu: &LU<Real, Dyn, Dyn>, b: &mut [Real]) {
+/// Solves `M x = b` in place through `lu`: the bits of `lu.solve_mut(b)`.
+/// The forward substitution starts at the first entry of the permuted `b`
+/// that is not zero when `b` holds no −0 (then each step it skips adds ±0
+/// to entries that are `+0` or not zero, which leaves them as they are; the
+/// factors are finite). A unit vector `eₖ`, a motor or stop row's column of
+/// `M⁻¹`, starts where the permutation moved its 1; a contact's row starts
+/// past the degrees of freedom it does not move.
+pub fn lu_solve(lu: &LU<Real, Dyn, Dyn>, b: &mut [Real]) {
     let m = lu.lu_internal();
     assert_eq!(m.nrows(), b.len(), "LU solve matrix dimension mismatch.");
+    if b.is_empty() {
+        return;
+    }
     lu.p()
         .permute_rows(&mut na::DVectorViewMut::from_slice(b, m.nrows()));
-    if let Some(first) = b.iter().position(|x| *x != 0.0) {
-        solve_unit_lower_from(m, b, first);
-    }
+    let negative_zero = b
+        .iter()
+        .any(|x| x.to_bits() == (-0.0 as Real).to_bits());
+    let first = if negative_zero {
+        0
+    } else {
+        b.iter().position(|x| *x != 0.0).unwrap_or(b.len())
+    };
+    solve_unit_lower_from(m, b, first);
     let _ = solve_upper(m, b);
 }

@@ -13,6 +13,7 @@ use crate::math::{
 use crate::prelude::MultibodyJoint;
 #[cfg(feature = "dim3")]
 use crate::utils::mat_to_na;
+use crate::utils::slice_blas::lu_solve;
 use crate::utils::{AngularInertiaOps, CrossProduct, CrossProductMatrix, IndexMut2, vect_to_na};
 use na::{
     self, DMatrix, DVectorView, DVectorViewMut, Dyn, LU, OMatrix, SMatrix, SVector, StorageMut,
@@ -695,7 +696,7 @@ impl Multibody {
 
         self.augmented_mass_indices
             .with_rearranged_rows_mut(&mut self.accelerations, |accs| {
-                self.acc_inv_augmented_mass.solve_mut(accs);
+                lu_solve(&self.acc_inv_augmented_mass, accs.as_mut_slice());
             });
 
         if check_implicit_coriolis_divergence {
@@ -758,7 +759,7 @@ impl Multibody {
                 self.augmented_mass_indices.with_rearranged_rows_mut(
                     &mut self.accelerations,
                     |accs| {
-                        self.inv_augmented_mass.solve_mut(accs);
+                        lu_solve(&self.inv_augmented_mass, accs.as_mut_slice());
                     },
                 );
 
@@ -1327,8 +1328,10 @@ impl Multibody {
             for k in 0..ndofs {
                 jacobians[j_id + ndofs + k] = jacobians[j_id + k];
             }
-            self.inv_augmented_mass
-                .solve_mut(&mut jacobians.rows_mut(j_id + ndofs, ndofs));
+            lu_solve(
+                &self.inv_augmented_mass,
+                &mut jacobians.as_mut_slice()[j_id + ndofs..j_id + 2 * ndofs],
+            );
 
             // lhs = Jᵀ M⁻¹ J = Σ J[k]·WJ[k]; only g1/g2 entries of J are nonzero.
             let lhs = jacobians[j_id + ndofs + g2] - c.coeff * jacobians[j_id + ndofs + g1];
@@ -1771,7 +1774,7 @@ impl Multibody {
             let mut out_invm_j = jacobians.rows_mut(wj_id, self.ndofs);
             self.augmented_mass_indices
                 .with_rearranged_rows_mut(&mut out_invm_j, |out_invm_j| {
-                    self.inv_augmented_mass.solve_mut(out_invm_j);
+                    lu_solve(&self.inv_augmented_mass, out_invm_j.as_mut_slice());
                 });
         }
 
@@ -1844,7 +1847,7 @@ impl Multibody {
             let mut out_invm_j = jacobians.rows_mut(wj_id, self.ndofs);
             self.augmented_mass_indices
                 .with_rearranged_rows_mut(&mut out_invm_j, |out_invm_j| {
-                    self.inv_augmented_mass.solve_mut(out_invm_j);
+                    lu_solve(&self.inv_augmented_mass, out_invm_j.as_mut_slice());
                 });
         }
 

@@ -5,7 +5,7 @@ use crate::dynamics::joint::MultibodyLink;
 use crate::dynamics::solver::{GenericJointConstraint, WritebackId};
 use crate::dynamics::{IntegrationParameters, JointMotor, Multibody};
 use crate::math::{DVector, Real};
-use crate::utils::slice_blas::lu_solve_unit;
+use crate::utils::slice_blas::lu_solve;
 
 /// Initializes and generate the velocity constraints applicable to the multibody links attached
 /// to this multibody_joint.
@@ -48,7 +48,7 @@ pub fn unit_joint_limit_constraint(
     jacobians.rows_mut(*j_id, ndofs * 2).fill(0.0);
     jacobians[dof_j_id] = 1.0;
     jacobians[dof_j_id + ndofs] = 1.0;
-    lu_solve_unit(
+    lu_solve(
         multibody.inv_augmented_mass(),
         &mut jacobians.as_mut_slice()[*j_id + ndofs..*j_id + 2 * ndofs],
     );
@@ -113,7 +113,7 @@ pub fn unit_joint_friction_constraint(
     jacobians.rows_mut(*j_id, ndofs * 2).fill(0.0);
     jacobians[dof_j_id] = 1.0;
     jacobians[dof_j_id + ndofs] = 1.0;
-    lu_solve_unit(
+    lu_solve(
         multibody.inv_augmented_mass(),
         &mut jacobians.as_mut_slice()[*j_id + ndofs..*j_id + 2 * ndofs],
     );
@@ -172,7 +172,7 @@ pub fn unit_joint_motor_constraint(
     jacobians.rows_mut(*j_id, ndofs * 2).fill(0.0);
     jacobians[dof_j_id] = 1.0;
     jacobians[dof_j_id + ndofs] = 1.0;
-    lu_solve_unit(
+    lu_solve(
         multibody.inv_augmented_mass(),
         &mut jacobians.as_mut_slice()[*j_id + ndofs..*j_id + 2 * ndofs],
     );
