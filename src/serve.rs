@@ -58,11 +58,21 @@ pub fn signals() -> tokio::sync::watch::Receiver<bool> {
     rx
 }
 
-/// A run checked and ready to open. [`prepare_run`] refuses everything a
-/// start can refuse before a byte is written; [`Prepared::open`] then makes
-/// or resumes the run directory. A coordinator opens its zenoh session in
-/// between, so an endpoint it cannot listen on leaves no run behind.
-pub struct Prepared {
+/// A run checked and ready to serve. A coordinator opens its zenoh session
+/// between [`prepare_run`] and [`Prepared::open_beside`], so an endpoint it
+/// cannot listen on leaves no new run directory behind, while an `--out`
+/// that exists is opened (its lock taken) before any network, so another
+/// coordinator holding it is named first.
+pub enum Prepared {
+    /// A new run: checked, nothing written yet.
+    New(Box<NewRun>),
+    /// An existing `--out` opened: a run resumed (or begun in an empty
+    /// directory), its lock held.
+    Resumed(Box<(Run, Vec<coordinator::run::Effect>)>),
+}
+
+/// A new run, everything a start can refuse refused, nothing written.
+pub struct NewRun {
     exp: protocol::experiment::Experiment,
     text: String,
     imported: Option<coordinator::evolve::Imported>,
@@ -72,7 +82,9 @@ pub struct Prepared {
 }
 
 /// Reads and checks the experiment, the flags and `--from` (exit 2 on a bad
-/// one), writing nothing.
+/// one), writing nothing for a new run. An `--out` that exists is opened
+/// here (a run resumed; a lock another coordinator holds, another
+/// experiment, or a file exits 2 before any network).
 pub fn prepare_run(job: &JobArgs) -> Result<Prepared, Failure> {
     let (mut exp, text) = load_experiment(&job.experiment)?;
     if let Some(n) = job.iterations {
@@ -145,31 +157,39 @@ pub fn prepare_run(job: &JobArgs) -> Result<Prepared, Failure> {
         }
         None => None,
     };
-    Ok(Prepared {
+    let new = NewRun {
         exp,
         text,
         imported,
         out: job.out.clone(),
         priority,
         failure_limit: job.max_trial_failures as usize,
-    })
+    };
+    if job.out.exists() {
+        return Ok(Prepared::Resumed(Box::new(new.open()?)));
+    }
+    Ok(Prepared::New(Box::new(new)))
 }
 
 impl Prepared {
-    /// Opens the run once `session` is open (so an endpoint that cannot be
-    /// listened on leaves no run directory behind); closes the session if
-    /// the run cannot be opened.
+    /// The run, once `session` is open: a new one's directory made now; the
+    /// session closed if the run cannot be opened.
     pub async fn open_beside(
         self,
         session: &zenoh::Session,
     ) -> Result<(Run, Vec<coordinator::run::Effect>), Failure> {
-        let opened = self.open();
+        let opened = match self {
+            Prepared::Resumed(opened) => return Ok(*opened),
+            Prepared::New(new) => new.open(),
+        };
         if opened.is_err() {
             let _ = session.close().await;
         }
         opened
     }
+}
 
+impl NewRun {
     /// Makes the run directory and its journal, or resumes the run in it.
     pub fn open(self) -> Result<(Run, Vec<coordinator::run::Effect>), Failure> {
         let mut opened =

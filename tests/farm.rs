@@ -552,6 +552,19 @@ fn a_second_coordinator_on_a_run_directory_exits_2_while_the_first_finishes() {
     let err = String::from_utf8_lossy(&second.stderr);
     assert_eq!(second.status.code(), Some(2), "{err}");
     assert!(err.contains(&holder) && err.contains("in use"), "{err}");
+    // Started again as the first was, on its port too: the run's lock is
+    // named, not the port (the run is opened before the network).
+    let third = naofarm()
+        .args(["coordinator", "--json"])
+        .arg(&exp)
+        .arg("--out")
+        .arg(&out)
+        .args(["--listen", &format!("tcp/127.0.0.1:{port}")])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&third.stderr);
+    assert_eq!(third.status.code(), Some(2), "{err}");
+    assert!(err.contains(&holder) && !err.contains("zenoh"), "{err}");
     let mut ws = vec![worker(port, 2, 5)];
     let status = c.wait_exit();
     kill_all(&mut ws);
