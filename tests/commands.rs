@@ -170,6 +170,48 @@ fn type_4_on_physics_its_toes_cannot_stand_is_noted() {
     assert!(!trial(&["--type", "4", "--substeps", "4"]));
 }
 
+/// A solve that loses an arm is the physics diverging, never a fall the
+/// robot took: the roll file's experiment-2 optimum at 2 × 10 ms and 60 PGS
+/// iterations turns its left shoulder pitch 4.5 rad in one cycle at seed 780
+/// (226 rad/s, every body still below the 500 rad/s spin check; docs/walk.md,
+/// session 46). That trial is reported as diverged, and the 84° past the
+/// stop that the lost solve showed is not reported as an overrun.
+#[test]
+fn an_arm_lost_by_the_solve_is_a_divergence_not_a_fall_past_its_stop() {
+    let file = root().join("experiments/physical-technical-arms-5ms-roll.toml");
+    let out = succeed(
+        naofarm()
+            .args([
+                "trial",
+                "--trials",
+                "1",
+                "--seed",
+                "780",
+                "--json",
+                "--threads",
+                "1",
+            ])
+            .arg("--experiment")
+            .arg(&file)
+            .args(["--substeps", "2", "--pgs-iterations", "60"])
+            .args(["--param", "ThighRelHip2_Z=-0.07843597398844161"])
+            .args(["--param", "height_lift=0.025411131913517095"])
+            .args([
+                "--param",
+                "long_offset_MidAnkles_2_Torso_Init=0.004026734901362553",
+            ])
+            .args(["--param", "ratio_flexion=0.7684769366690007"])
+            .args(["--param", "xlength_step_max=0.10926926057542778"]),
+    );
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["diverged"], 1, "{json}");
+    let trial = &json["trials"][0];
+    assert_eq!(trial["diverged"], true, "{trial}");
+    assert_eq!(trial["fell"], true, "{trial}");
+    let worst = json["worst_stop_excess"]["deg"].as_f64().unwrap_or(0.0);
+    assert!(worst < 2.0, "an overrun of {worst}° was reported: {json}");
+}
+
 /// `trial --experiment FILE` runs the file's walk, physics, trial duration
 /// and expert set with its fixed values: the same trials, bit for bit, as
 /// those flags spelled out; `--param` overrides one value; a synthetic

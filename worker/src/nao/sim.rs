@@ -32,6 +32,13 @@ pub const SANE_DISTANCE_M: f64 = 1000.0;
 pub const SANE_SPEED_M_S: f64 = 50.0;
 /// Spinning faster than this, a body has diverged, rad/s.
 pub const SANE_SPIN_RAD_S: f64 = 500.0;
+/// A hinge that turns faster than this over one 20 ms cycle has diverged,
+/// rad/s (3 rad a cycle). The servos are capped at 6.14 rad/s and the fastest
+/// joint of the shipped files over a cycle, landings and falls included, was
+/// 36 rad/s (docs/walk.md, session 46); an unstable solve of an arm turned a
+/// shoulder 4.5 rad in one cycle (226 rad/s) while every body stayed below
+/// [`SANE_SPIN_RAD_S`], and was scored as a fall with an 84° overrun.
+pub const SANE_JOINT_SPEED_RAD_S: f64 = 150.0;
 /// SimSpark's drag coefficient (force per velocity, torque per angular velocity).
 pub const DRAG: f64 = 0.01;
 const GRAVITY: f64 = 9.81;
@@ -329,6 +336,8 @@ pub struct Sim {
     cycle: u64,
     prev_linvel: Vector3<f64>,
     accel: Vector3<f64>,
+    /// The hinge angles at the end of the last cycle, rad.
+    prev_angles: Vec<f64>,
 }
 
 fn v3(a: [f64; 3]) -> Vec3 {
@@ -657,12 +666,14 @@ impl Sim {
             cycle: 0,
             prev_linvel: Vector3::zeros(),
             accel: Vector3::new(0.0, 0.0, GRAVITY),
+            prev_angles: Vec::new(),
         };
         let torso_pose =
             motions[0] * nalgebra::Translation3::from(Vector3::from(model.bodies[0].centre));
         if !settings.impulse_joints {
             sim.pose_multibody(&angles, &torso_pose)?;
         }
+        sim.prev_angles = sim.joint_angles();
         Ok(sim)
     }
 
@@ -836,7 +847,14 @@ impl Sim {
         let lv = Vector3::new(f64::from(lv.x), f64::from(lv.y), f64::from(lv.z));
         self.accel = (lv - self.prev_linvel) / CYCLE_S + Vector3::new(0.0, 0.0, GRAVITY);
         self.prev_linvel = lv;
-        Ok(self.perceive())
+        let p = self.perceive();
+        let turn = SANE_JOINT_SPEED_RAD_S * CYCLE_S;
+        let turned = |(a, b): (&f64, &f64)| (a - b).abs() <= turn;
+        if !p.joint_angles_rad.iter().zip(&self.prev_angles).all(turned) {
+            return Err(SimError::Diverged(self.time_s()));
+        }
+        self.prev_angles.clone_from(&p.joint_angles_rad);
+        Ok(p)
     }
 
     /// Whether the state is one a robot can be in: every body finite, within
@@ -1288,5 +1306,27 @@ mod tests {
         let dof = mb.link(link).unwrap().assembly_id();
         mb.generalized_velocity_mut()[dof] = 1.0e4;
         assert!(matches!(sim.hold(&q), Err(SimError::Diverged(_))));
+    }
+
+    /// A hinge that turns more than [`SANE_JOINT_SPEED_RAD_S`] allows in one
+    /// cycle is reported as diverged, even while every body moves slowly; a
+    /// turn just within it is not. (The cycle's own turn while holding is
+    /// far below 0.05 rad, so the last angles moved by 3 ± 0.05 rad give a
+    /// turn on either side of the 3 rad bound.)
+    #[test]
+    fn a_hinge_that_turns_too_far_in_a_cycle_is_reported_as_diverged() {
+        let m = model(0);
+        let q = standing_angles(&m);
+        let bound = SANE_JOINT_SPEED_RAD_S * CYCLE_S;
+        let knee = m.joints.iter().position(|j| j.name == "lle4").unwrap();
+        let mut sim = Sim::new(&m, SimSettings::default(), &Start::upright(q.clone())).unwrap();
+        let mut within = Sim::new(&m, SimSettings::default(), &Start::upright(q.clone())).unwrap();
+        for s in [&mut sim, &mut within] {
+            assert!(s.hold(&q).is_ok());
+        }
+        sim.prev_angles[knee] += bound + 0.05;
+        within.prev_angles[knee] += bound - 0.05;
+        assert!(matches!(sim.hold(&q), Err(SimError::Diverged(_))));
+        assert!(within.hold(&q).is_ok());
     }
 }
