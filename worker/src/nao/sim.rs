@@ -849,7 +849,18 @@ impl Sim {
         self.prev_linvel = lv;
         let p = self.perceive();
         let turn = SANE_JOINT_SPEED_RAD_S * CYCLE_S;
-        let turned = |(a, b): (&f64, &f64)| (a - b).abs() <= turn;
+        // Impulse joints' angles are read in [−π, π] (`joint_angles`): a
+        // hinge that passes ±π turns by the difference taken round the circle.
+        let wrap = self.settings.impulse_joints;
+        let turned = |(a, b): (&f64, &f64)| {
+            let d = a - b;
+            let d = if wrap {
+                libm::remainder(d, std::f64::consts::TAU)
+            } else {
+                d
+            };
+            d.abs() <= turn
+        };
         if !p.joint_angles_rad.iter().zip(&self.prev_angles).all(turned) {
             return Err(SimError::Diverged(self.time_s()));
         }
@@ -1328,5 +1339,17 @@ mod tests {
         within.prev_angles[knee] += bound - 0.05;
         assert!(matches!(sim.hold(&q), Err(SimError::Diverged(_))));
         assert!(within.hold(&q).is_ok());
+        // Impulse joints read their angles in [−π, π]: a hinge that passes
+        // ±π has turned by the difference round the circle, not by 2π.
+        let impulse = SimSettings {
+            impulse_joints: true,
+            ..SimSettings::default()
+        };
+        let mut round = Sim::new(&m, impulse, &Start::upright(q.clone())).unwrap();
+        assert!(round.hold(&q).is_ok());
+        round.prev_angles[knee] += std::f64::consts::TAU;
+        assert!(round.hold(&q).is_ok());
+        round.prev_angles[knee] += std::f64::consts::TAU - (bound + 0.05);
+        assert!(matches!(round.hold(&q), Err(SimError::Diverged(_))));
     }
 }
