@@ -848,20 +848,7 @@ impl Sim {
         self.accel = (lv - self.prev_linvel) / CYCLE_S + Vector3::new(0.0, 0.0, GRAVITY);
         self.prev_linvel = lv;
         let p = self.perceive();
-        let turn = SANE_JOINT_SPEED_RAD_S * CYCLE_S;
-        // Impulse joints' angles are read in [−π, π] (`joint_angles`): a
-        // hinge that passes ±π turns by the difference taken round the circle.
-        let wrap = self.settings.impulse_joints;
-        let turned = |(a, b): (&f64, &f64)| {
-            let d = a - b;
-            let d = if wrap {
-                libm::remainder(d, std::f64::consts::TAU)
-            } else {
-                d
-            };
-            d.abs() <= turn
-        };
-        if !p.joint_angles_rad.iter().zip(&self.prev_angles).all(turned) {
+        if !self.hinges_sane(&p.joint_angles_rad) {
             return Err(SimError::Diverged(self.time_s()));
         }
         self.prev_angles.clone_from(&p.joint_angles_rad);
@@ -872,7 +859,8 @@ impl Sim {
     /// [`SANE_DISTANCE_M`] of the origin, slower than [`SANE_SPEED_M_S`] and
     /// [`SANE_SPIN_RAD_S`]. A multibody that lost stability (it happens in
     /// some violent falls) grows without bound in a few steps, finite at first:
-    /// non-finite checks alone let a "fall" 10⁸ m away through.
+    /// non-finite checks alone let a "fall" 10⁸ m away through. The hinges'
+    /// angles are checked apart, once perceived ([`Sim::hinges_sane`]).
     fn sane(&self) -> bool {
         self.world.quarantine().is_empty()
             && self.own_bodies.iter().all(|h| {
@@ -885,7 +873,25 @@ impl Sim {
                     && f64::from(v.length()) < SANE_SPEED_M_S
                     && f64::from(w.length()) < SANE_SPIN_RAD_S
             })
-            && self.joint_angles().iter().all(|a| a.is_finite())
+    }
+
+    /// Whether every hinge turned at most [`SANE_JOINT_SPEED_RAD_S`] allows
+    /// since the last cycle's `prev_angles`, to `angles`. A non-finite angle
+    /// fails it too (the start pose is finite, and so then is every angle
+    /// kept). Impulse joints' angles are read in [−π, π] (`joint_angles`): a
+    /// hinge that passes ±π turns by the difference taken round the circle.
+    fn hinges_sane(&self, angles: &[f64]) -> bool {
+        let turn = SANE_JOINT_SPEED_RAD_S * CYCLE_S;
+        let wrap = self.settings.impulse_joints;
+        angles.iter().zip(&self.prev_angles).all(|(a, b)| {
+            let d = a - b;
+            let d = if wrap {
+                libm::remainder(d, std::f64::consts::TAU)
+            } else {
+                d
+            };
+            d.abs() <= turn
+        })
     }
 
     /// Sets each multibody hinge's motor for the next physics step, and its
