@@ -27,7 +27,7 @@ pub fn write(text: &str) -> bool {
     }
 }
 
-/// Writes a formatted line (see [`outln!`]).
+/// Writes a formatted line (what `outln!` expands to).
 pub fn line(args: std::fmt::Arguments<'_>) {
     write(&format!("{args}\n"));
 }

@@ -2,7 +2,7 @@
 //! core: CLOP's benchmark against baselines, the local tuning of any noisy
 //! program, and what they need.
 //!
-//! Modules: [`problems`] (CLOP's artificial test problems), [`bench`] (the
+//! Modules: [`problems`] (CLOP's artificial test problems), [`mod@bench`] (the
 //! regret and cost benchmark harness), [`cmaes`] (the CMA-ES baseline),
 //! [`tune`] (local tuning with evaluator processes and a replayable log).
 //!

@@ -600,7 +600,9 @@ impl Gait {
     }
 
     /// [`Gait::targets`] with the feet placed against a torso turned by
-    /// `turn` (rad, about the vertical; [`Gait::legs_at`]).
+    /// `turn` (rad, about the vertical): each foot's place about the hip
+    /// midpoint is turned by `-turn`, so the turned torso puts the feet
+    /// where the plan has them.
     #[must_use]
     pub fn targets_turned(&self, rest: &[f64], t: f64, turn: f64) -> Vec<f64> {
         self.targets_of(rest, &self.state(t), turn)
