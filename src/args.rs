@@ -406,7 +406,9 @@ pub struct StandArgs {
 /// Arguments of `trial`.
 #[derive(Args, Debug)]
 pub struct TrialArgs {
-    /// Start from a named set (`expert`, the paper's expert values).
+    /// Start from a named set: `expert` (the experiment's expert values, else
+    /// the paper's), or, with --experiment a run directory, Table IV's
+    /// `optim1` (the run's ν′) or `optim2` (CLOP's mean).
     #[arg(long, default_value = "expert")]
     pub set: String,
     /// Override a parameter, NAME=VALUE (repeatable).
@@ -425,10 +427,11 @@ pub struct TrialArgs {
     /// experiment's).
     #[arg(long)]
     pub walk: Option<String>,
-    /// Start from an experiment file: its walk, robot type, trial duration,
-    /// physics, and its expert set with its fixed values. Every other flag
-    /// overrides it (`--param` one value).
-    #[arg(long, value_name = "FILE", conflicts_with = "run_dir")]
+    /// Start from an experiment file, or from a run directory (the experiment
+    /// as the run journaled it): its walk, robot type, trial duration,
+    /// physics, and its expert set (or --set's) with its fixed values. Every
+    /// other flag overrides it (`--param` one value).
+    #[arg(long, value_name = "FILE|RUN_DIR", conflicts_with = "run_dir")]
     pub experiment: Option<std::path::PathBuf>,
     /// Set one of the walk engine's constants (KEY=VALUE, repeatable): to
     /// measure them (docs/walk.md); farm trials always use the engine's own.

@@ -208,3 +208,25 @@ pub fn read_run(dir: &Path) -> Result<coordinator::run::RunView, Failure> {
         e => Failure::Job(e.into()),
     })
 }
+
+/// The run in `dir` replayed from its journal as a resume replays it (its
+/// CLOP state, hence its Table IV sets), for a command that only reads it:
+/// errors as [`read_run`]'s.
+pub fn replay_run(dir: &Path) -> Result<coordinator::evolve::Evolve, Failure> {
+    if let Some(why) = not_a_run(dir) {
+        return Err(Failure::Usage(anyhow::Error::msg(why)));
+    }
+    coordinator::run::replay(dir).map_err(|e| match e {
+        coordinator::run::RunError::Journal(coordinator::journal::JournalError::Io { .. }) => {
+            Failure::Usage(e.into())
+        }
+        e => Failure::Job(e.into()),
+    })
+}
+
+/// A Table IV set's short name, as `naofarm trial --set` takes it and the
+/// report names its replay files: `Optim.1` → `optim1`.
+#[must_use]
+pub fn set_key(name: &str) -> String {
+    name.to_lowercase().replace('.', "")
+}

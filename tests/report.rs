@@ -22,8 +22,7 @@ fn synthetic_run(dir: &Path) -> serde_json::Value {
     events(&out.stdout).finished.expect("a finished line")
 }
 
-/// A 2-iteration run of experiment 2 (the NAO, closed-loop walk) in `dir/run`.
-/// Two iterations of an experiment file of `experiments/`.
+/// Two iterations of an experiment file of `experiments/`, in `dir/run`.
 fn nao_run(dir: &Path, file: &str) {
     succeed(
         naofarm()
@@ -539,6 +538,82 @@ fn a_nao_report_has_an_animated_replay_of_expert_optim1_and_optim2() {
             "{name}: {frames} frames for {sim_s} s at 12.5 frames/s"
         );
     }
+}
+
+/// `naofarm trial --experiment RUN_DIR --set NAME` runs a Table IV set of a
+/// run by its name, exactly as the report ran it: over the same seeds, every
+/// column's s, mx, my, ex and ey to the bit. A set the run has not got
+/// (ν′ before any ACCEPT) or a run's set asked of an experiment file is a
+/// usage error that says so.
+#[test]
+fn trial_runs_a_runs_table_iv_sets_by_name_as_the_report_does() {
+    let dir = scratch("report-sets");
+    nao_run(&dir, "physical-technical.toml");
+    let out = report(&dir);
+    let table: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("table4.json")).unwrap()).unwrap();
+    let columns = table["columns"].as_array().unwrap();
+    let names: Vec<_> = columns
+        .iter()
+        .map(|c| c["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["Expert", "Optim.1", "Optim.2"]);
+    let trial = |set: &str| -> std::process::Command {
+        let mut c = naofarm();
+        c.args([
+            "trial", "--trials", "8", "--seed", "777", "--json", "--set", set,
+        ])
+        .arg("--experiment")
+        .arg(dir.join("run"));
+        c
+    };
+    for (column, set) in columns.iter().zip(["expert", "optim1", "Optim.2"]) {
+        let t: serde_json::Value =
+            serde_json::from_slice(&succeed(&mut trial(set)).stdout).unwrap();
+        for key in ["s", "mx", "my", "ex", "ey", "planned_m"] {
+            assert_eq!(
+                t[key].as_f64().map(f64::to_bits),
+                column[key].as_f64().map(f64::to_bits),
+                "{set}: {key}"
+            );
+        }
+        for (name, v) in column["params"].as_object().unwrap() {
+            assert_eq!(t["params"][name], *v, "{set}: {name}");
+        }
+    }
+    // A run whose every iteration is rejected (no walk is that straight) has
+    // no ν′, but has CLOP's mean.
+    let text = std::fs::read_to_string(root().join("experiments/physical-technical.toml"))
+        .unwrap()
+        .replace("xy_ratio = 0.25", "xy_ratio = 0.0")
+        .replace("trial_duration_s = 10.0", "trial_duration_s = 1.0");
+    let file = dir.join("straight.toml");
+    std::fs::write(&file, text).unwrap();
+    succeed(
+        naofarm()
+            .args(["run", "--json", "--workers", "2", "--iterations", "1"])
+            .arg(&file)
+            .arg("--out")
+            .arg(dir.join("straight")),
+    );
+    let sets = |set: &str| {
+        let mut c = naofarm();
+        c.args(["trial", "--trials", "1", "--set", set, "--experiment"])
+            .arg(dir.join("straight"));
+        c
+    };
+    let e = fails(&mut sets("optim1"), 2);
+    assert!(e.contains("no ν′ yet"), "{e}");
+    succeed(&mut sets("optim2"));
+    let e = fails(
+        naofarm()
+            .args(["trial", "--trials", "1", "--set", "optim1", "--experiment"])
+            .arg(&file),
+        2,
+    );
+    assert!(e.contains("is an experiment file"), "{e}");
+    let e = fails(naofarm().args(["trial", "--set", "best"]), 2);
+    assert!(e.contains("--set `best`"), "{e}");
 }
 
 /// The entries of a `simspark-types.rb`: each row's name and its keys' texts.

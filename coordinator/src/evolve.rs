@@ -399,6 +399,19 @@ impl Evolve {
         self.clop.to_external(&self.clop.mean())
     }
 
+    /// The parameter sets Table IV names, in its order: `Expert` (the
+    /// experiment's), `Optim.1` (ν′, once an iteration was accepted or a
+    /// history imported one) and `Optim.2` (CLOP's mean); external units,
+    /// CLOP's order. `naofarm report` runs these, and `naofarm trial --set`
+    /// picks one by name.
+    #[must_use]
+    pub fn table_sets(&self) -> Vec<(&'static str, Vec<f64>)> {
+        let mut sets = vec![("Expert", self.exp.expert_values())];
+        sets.extend(self.best.as_ref().map(|b| ("Optim.1", b.params.clone())));
+        sets.push(("Optim.2", self.optim2()));
+        sets
+    }
+
     /// Decision counts (accept, equivalent, reject) of this run.
     #[must_use]
     pub fn counts(&self) -> (u64, u64, u64) {

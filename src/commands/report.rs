@@ -9,7 +9,6 @@ use std::path::{Path, PathBuf};
 
 use anyhow::anyhow;
 use coordinator::evolve::DecidedIteration;
-use coordinator::run::replay;
 use plotters::prelude::*;
 use protocol::{
     params::ParamValues, pickout::stats, Decision, Experiment, Stats, TrialModel, TrialRequest,
@@ -142,11 +141,11 @@ fn one(
         "s and mx of every iteration, ν′'s mx".into(),
     ));
 
-    let rows = table_iv(dir, &exp, decided, trials, threads)?;
+    let rows = table_iv(dir, &exp, trials, threads)?;
     let mut replays = Vec::new();
     if exp.model == TrialModel::Nao {
         for r in &rows {
-            let file = format!("replay-{}.svg", r.name.to_lowercase().replace('.', ""));
+            let file = format!("replay-{}.svg", crate::common::set_key(r.name));
             write(&file, &replay_svg(&exp, &r.params, r.name)?)?;
             replays.push((file, format!("{}: trial seed {TABLE_SEED}", r.name)));
         }
@@ -444,28 +443,10 @@ fn progress_figure(decided: &[DecidedIteration]) -> anyhow::Result<String> {
 fn table_iv(
     dir: &Path,
     exp: &Experiment,
-    decided: &[DecidedIteration],
     trials: u32,
     threads: usize,
 ) -> Result<Vec<Row>, Failure> {
-    // The experiment's expert value, else the registry's, else the centre of L.
-    let expert: Vec<f64> = exp
-        .parameter
-        .iter()
-        .map(|p| {
-            p.expert
-                .or_else(|| protocol::params::find(&p.name).map(|k| k.default))
-                .unwrap_or((p.lower + p.upper) / 2.0)
-        })
-        .collect();
-    let optim1 = decided
-        .iter()
-        .rev()
-        .find_map(|d| d.best.as_ref().map(|b| b.params.clone()));
-    let optim2 = replay(dir).map_err(|e| Failure::Job(e.into()))?.optim2();
-    let mut rows = vec![("Expert", expert)];
-    rows.extend(optim1.map(|p| ("Optim.1", p)));
-    rows.push(("Optim.2", optim2));
+    let rows = crate::common::replay_run(dir)?.table_sets();
     rows.into_iter()
         .map(|(name, params)| {
             let runs = run_trials(exp, &params, trials, threads)?;

@@ -5,7 +5,8 @@ use std::time::Instant;
 
 use anyhow::anyhow;
 use protocol::{
-    measurement::Measurement, params::ParamValues, pickout::stats, TrialModel, WalkEngine,
+    measurement::Measurement, params::ParamValues, pickout::stats, Experiment, TrialModel,
+    WalkEngine,
 };
 use worker::nao::{
     footwork::Footwork,
@@ -25,21 +26,10 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     if let (Some(dir), Some(i), Some(k)) = (&a.run_dir, a.iteration, a.trial) {
         return replay(a, dir, i, k);
     }
-    if a.set != "expert" {
-        return Err(Failure::Usage(anyhow!(
-            "--set `{}`: the only named set is `expert`",
-            a.set
-        )));
-    }
     if a.trials == 0 || a.trials > 100_000 {
         return Err(Failure::Usage(anyhow!("--trials must be in 1..=100000")));
     }
-    let exp = a
-        .experiment
-        .as_deref()
-        .map(load_experiment)
-        .transpose()?
-        .map(|(e, _)| e);
+    let (exp, start) = start_from(a)?.unzip();
     if exp.as_ref().is_some_and(|e| e.model != TrialModel::Nao) {
         return Err(Failure::Usage(anyhow!(
             "--experiment: a trial runs the NAO, not the `synthetic` model"
@@ -58,10 +48,11 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         .robot_type
         .or(exp.as_ref().map(|e| e.robot_type))
         .unwrap_or(0);
-    // The experiment's expert set and fixed values, then each --param over them.
+    // The experiment's set (--set) and fixed values, then each --param over them.
     let mut params = exp
         .as_ref()
-        .map(|e| e.full_params(&e.expert_values()))
+        .zip(start.as_deref())
+        .map(|(e, v)| e.full_params(v))
         .unwrap_or_default();
     let given = parse_params(&a.params)?;
     for (name, v) in &given {
@@ -175,6 +166,7 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     );
     if a.json {
         let v = serde_json::json!({
+            "set": crate::common::set_key(&a.set),
             "params": params_json(&params),
             "robot_type": robot_type,
             "walk": engine.name(),
@@ -285,6 +277,52 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         );
     }
     Ok(())
+}
+
+/// The experiment `--experiment` names and the values `--set` picks in it:
+/// an experiment file's expert set, or one of a run directory's Table IV
+/// sets (`expert`, `optim1`: ν′, `optim2`: CLOP's mean), with the run's
+/// experiment as it journaled it. `None`: no experiment.
+fn start_from(a: &TrialArgs) -> Result<Option<(Experiment, Vec<f64>)>, Failure> {
+    let key = crate::common::set_key(&a.set);
+    if !["expert", "optim1", "optim2"].contains(&key.as_str()) {
+        return Err(Failure::Usage(anyhow!(
+            "--set `{}`: the sets are `expert` and a run's `optim1` (ν′) and `optim2` (CLOP's mean)",
+            a.set
+        )));
+    }
+    let Some(path) = a.experiment.as_deref() else {
+        if key == "expert" {
+            return Ok(None);
+        }
+        return Err(Failure::Usage(anyhow!(
+            "--set {key} is a set a run found: give --experiment the run's directory"
+        )));
+    };
+    if !path.is_dir() {
+        let (e, _) = load_experiment(path)?;
+        if key != "expert" {
+            return Err(Failure::Usage(anyhow!(
+                "--set {key} is a set a run found: {} is an experiment file, which has only \
+                 `expert`; give --experiment the run's directory",
+                path.display()
+            )));
+        }
+        let values = e.expert_values();
+        return Ok(Some((e, values)));
+    }
+    let run = crate::common::replay_run(path)?;
+    let found = run
+        .table_sets()
+        .into_iter()
+        .find(|(name, _)| crate::common::set_key(name) == key);
+    match found {
+        Some((_, values)) => Ok(Some((run.experiment().clone(), values))),
+        None => Err(Failure::Usage(anyhow!(
+            "--set {key}: the run in {} has no ν′ yet (no iteration accepted)",
+            path.display()
+        ))),
+    }
 }
 
 /// Whether two measurements are the same to the bit.
