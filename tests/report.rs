@@ -552,6 +552,13 @@ fn trial_runs_a_runs_table_iv_sets_by_name_as_the_report_does() {
     let out = report(&dir);
     let table: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("table4.json")).unwrap()).unwrap();
+    // The page says how.
+    let page = std::fs::read_to_string(out.join("index.html")).unwrap();
+    let how = format!(
+        "naofarm trial --experiment {} --set optim1 --trials 8 --seed 777",
+        dir.join("run").display()
+    );
+    assert!(page.contains(&how), "{how} on the page");
     let columns = table["columns"].as_array().unwrap();
     let names: Vec<_> = columns
         .iter()

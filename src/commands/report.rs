@@ -158,7 +158,7 @@ fn one(
     }
     write(
         "index.html",
-        &index_html(&exp, &view, &rows, trials, &figures, &replays),
+        &index_html(dir, &exp, &view, &rows, trials, &figures, &replays),
     )?;
     outln!("report of {} in {}", dir.display(), out.display());
     outln!("{md}");
@@ -754,6 +754,7 @@ fn utc_text(ms: u64) -> String {
 
 /// One self-contained page: the run's facts, Table IV and every figure.
 fn index_html(
+    dir: &Path,
     exp: &Experiment,
     view: &coordinator::run::RunView,
     rows: &[Row],
@@ -837,6 +838,14 @@ fn index_html(
     }
     h += "</table>\n";
     if exp.model == TrialModel::Nao {
+        let _ = writeln!(
+            h,
+            "<p>A column again, on more or other seeds, or recorded (<code>--record</code>, \
+             <code>--render</code>): <code>naofarm trial --experiment {d} --set optim1 \
+             --trials {trials} --seed {TABLE_SEED}</code> (<code>--set</code> \
+             <code>expert</code>, <code>optim1</code> or <code>optim2</code>).</p>",
+            d = escape(&dir.display().to_string())
+        );
         let _ = writeln!(
             h,
             "<p>These bodies as SimSpark robot types, to try them on the league's server: \
