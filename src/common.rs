@@ -198,25 +198,25 @@ pub fn not_a_run(dir: &Path) -> Option<String> {
 /// Reads the run in `dir` for a command that only reads it: a journal that
 /// cannot be opened is a usage error (exit 2), a damaged one a failed job.
 pub fn read_run(dir: &Path) -> Result<coordinator::run::RunView, Failure> {
-    if let Some(why) = not_a_run(dir) {
-        return Err(Failure::Usage(anyhow::Error::msg(why)));
-    }
-    coordinator::run::read_run(dir).map_err(|e| match e {
-        coordinator::run::RunError::Journal(coordinator::journal::JournalError::Io { .. }) => {
-            Failure::Usage(e.into())
-        }
-        e => Failure::Job(e.into()),
-    })
+    only_read(dir, coordinator::run::read_run)
 }
 
 /// The run in `dir` replayed from its journal as a resume replays it (its
 /// CLOP state, hence its Table IV sets), for a command that only reads it:
 /// errors as [`read_run`]'s.
 pub fn replay_run(dir: &Path) -> Result<coordinator::evolve::Evolve, Failure> {
+    only_read(dir, coordinator::run::replay)
+}
+
+/// `read` of the run in `dir`, its errors as a reading command gives them.
+fn only_read<T>(
+    dir: &Path,
+    read: impl FnOnce(&Path) -> Result<T, coordinator::run::RunError>,
+) -> Result<T, Failure> {
     if let Some(why) = not_a_run(dir) {
         return Err(Failure::Usage(anyhow::Error::msg(why)));
     }
-    coordinator::run::replay(dir).map_err(|e| match e {
+    read(dir).map_err(|e| match e {
         coordinator::run::RunError::Journal(coordinator::journal::JournalError::Io { .. }) => {
             Failure::Usage(e.into())
         }
