@@ -1083,13 +1083,18 @@ fn bench_sim_reports_its_shares_over_rounds() {
         "{v}"
     );
     // One thread's CPU clock never runs ahead of the wall clock, so its
-    // real-time factor is never the smaller (up to the clocks' reads).
+    // real-time factor is never the smaller, up to the two clocks' reads:
+    // a millisecond over the row's time. (A second of simulation at 150×
+    // lasts 7 ms, and the thread's CPU clock was seen 75 µs ahead of the
+    // wall clock over one such row under a loaded CI: 1 %.)
     for r in rows {
-        let (wall, cpu) = (
+        let (wall, cpu, sim) = (
             r["realtime_factor"].as_f64().unwrap(),
             r["cpu_realtime_factor"].as_f64().unwrap(),
+            r["sim_s"].as_f64().unwrap(),
         );
-        assert!(cpu.is_finite() && cpu >= 0.99 * wall, "{r}");
+        assert!(sim > 0.0 && sim <= 15.0 + 1e-9, "{r}");
+        assert!(cpu.is_finite() && sim / cpu <= sim / wall + 1e-3, "{r}");
     }
     assert!(
         v["arms_5ms_cpu_realtime_factor"].as_f64().unwrap() > 0.0,

@@ -739,6 +739,7 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
                 "cpu_realtime_factor": c,
                 "steps_per_second": sps(r),
                 "fell": r.fell,
+                "sim_s": r.sim_s,
             })).collect::<Vec<_>>(),
         });
         for (f, i, t) in &files {
