@@ -121,3 +121,40 @@ fn seeds_are_the_seed_modules() {
         }
     }
 }
+
+#[test]
+fn table_iv_sets_are_the_expert_nu_prime_and_clops_mean() {
+    let names =
+        |ev: &Evolve| -> Vec<&'static str> { ev.table_sets().iter().map(|(n, _)| *n).collect() };
+    // Before any decision: no ν′.
+    let (mut ev, first) = Evolve::start(exp(), &Imported::default());
+    assert_eq!(names(&ev), ["Expert", "Optim.2"]);
+    let sets = ev.table_sets();
+    assert_eq!(sets[0].1, ev.experiment().expert_values());
+    assert_eq!(sets[1].1, ev.optim2());
+    // Through the run: Optim.1 is ν′ as the history records it after each
+    // decision, Optim.2 CLOP's mean.
+    let mut open = opened(&first);
+    while let Some(o) = open.first().cloned() {
+        open.remove(0);
+        for k in 0..3 {
+            let actions = ev
+                .apply(o.iteration, k as u32, o.seeds[k], measure(&o, k))
+                .unwrap();
+            open.extend(opened(&actions));
+        }
+        let last = ev.history().last().unwrap().best.clone();
+        let sets = ev.table_sets();
+        let optim1 = sets.iter().find(|(n, _)| *n == "Optim.1").map(|(_, v)| v);
+        assert_eq!(optim1, last.as_ref().map(|b| &b.params));
+        assert_eq!(sets.last().unwrap(), &("Optim.2", ev.optim2()));
+    }
+    assert!(ev.finished());
+    let imported = ev.to_imported();
+    assert!(imported.best.is_some(), "this run accepts");
+    // A run started from that history has its ν′ before its own first decision.
+    let (ev, _) = Evolve::start(exp(), &imported);
+    assert_eq!(ev.history().len(), 0);
+    assert_eq!(names(&ev), ["Expert", "Optim.1", "Optim.2"]);
+    assert_eq!(ev.table_sets()[1].1, imported.best.unwrap().params);
+}
