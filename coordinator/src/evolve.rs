@@ -406,9 +406,10 @@ impl Evolve {
     /// picks one by name.
     #[must_use]
     pub fn table_sets(&self) -> Vec<(&'static str, Vec<f64>)> {
-        let mut sets = vec![("Expert", self.exp.expert_values())];
-        sets.extend(self.best.as_ref().map(|b| ("Optim.1", b.params.clone())));
-        sets.push(("Optim.2", self.optim2()));
+        let [expert, optim1, optim2] = TABLE_SETS;
+        let mut sets = vec![(expert, self.exp.expert_values())];
+        sets.extend(self.best.as_ref().map(|b| (optim1, b.params.clone())));
+        sets.push((optim2, self.optim2()));
         sets
     }
 
@@ -472,6 +473,9 @@ impl Evolve {
             .collect()
     }
 }
+
+/// The names of Table IV's sets, in its order ([`Evolve::table_sets`]).
+pub const TABLE_SETS: [&str; 3] = ["Expert", "Optim.1", "Optim.2"];
 
 /// ACCEPT = Win, EQUIVALENT = Draw, REJECT = Loss.
 #[must_use]

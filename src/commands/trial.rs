@@ -285,7 +285,8 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
 /// experiment as it journaled it. `None`: no experiment.
 fn start_from(a: &TrialArgs) -> Result<Option<(Experiment, Vec<f64>)>, Failure> {
     let key = crate::common::set_key(&a.set);
-    if !["expert", "optim1", "optim2"].contains(&key.as_str()) {
+    let known = coordinator::evolve::TABLE_SETS;
+    if !known.iter().any(|name| crate::common::set_key(name) == key) {
         return Err(Failure::Usage(anyhow!(
             "--set `{}`: the sets are `expert` and a run's `optim1` (ν′) and `optim2` (CLOP's mean)",
             a.set
