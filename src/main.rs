@@ -4,6 +4,7 @@
 //! and the leaves they share: [`common`] (exit-code failure, experiment
 //! files, NAME=VALUE parameters), [`out`] (pipe-safe output), [`net`] (zenoh
 //! configuration and session), [`serve`] (serving a run with its view),
+//! [`crew`] (a bench's processes and scratch, taken down with it),
 //! [`view`] (the progress view), [`render`] (a trial's animated replay). Leaves use no command; commands use no
 //! other command. Library logic belongs in the crates, not here.
 
@@ -13,6 +14,7 @@ mod out;
 mod args;
 mod commands;
 mod common;
+mod crew;
 mod net;
 mod render;
 mod serve;

@@ -1289,3 +1289,163 @@ fn a_start_that_cannot_listen_or_is_refused_leaves_no_run_behind() {
     assert!(!out.exists(), "--priority 0 left {} behind", out.display());
     drop(held);
 }
+
+/// The processes whose environment carries `NAOFARM_E2E_TAG=tag`: a command
+/// started with it and every process it started.
+fn tagged(tag: &str) -> Vec<u32> {
+    let needle = format!("NAOFARM_E2E_TAG={tag}");
+    std::fs::read_dir("/proc")
+        .unwrap()
+        .filter_map(|e| {
+            let e = e.ok()?;
+            let pid: u32 = e.file_name().to_str()?.parse().ok()?;
+            let env = std::fs::read(e.path().join("environ")).ok()?;
+            env.split(|&b| b == 0)
+                .any(|v| v == needle.as_bytes())
+                .then_some(pid)
+        })
+        .collect()
+}
+
+/// What is left in `dir`, by name.
+fn left_in(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+        .collect()
+}
+
+/// `bench fleet` on a small fleet (2 runs, a router, 2 workers of 2 slots)
+/// measures every run to its end and, once it has printed, leaves no
+/// process it started and nothing in the directory its journals went to.
+#[test]
+fn bench_fleet_measures_a_small_fleet_and_leaves_nothing_behind() {
+    let dir = scratch("bench-fleet");
+    let tag = uuid::Uuid::new_v4().to_string();
+    let out = succeed(
+        naofarm()
+            .args([
+                "bench",
+                "fleet",
+                "--runs",
+                "2",
+                "--workers",
+                "2",
+                "--slots",
+                "2",
+            ])
+            .args(["--trial-ms", "20", "--iterations", "20", "--trials", "4"])
+            .args(["--depth", "2", "--priorities", "1,2", "--json", "--dir"])
+            .arg(&*dir)
+            .env("NAOFARM_E2E_TAG", &tag),
+    );
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        (r["runs"].as_u64(), r["workers"].as_u64()),
+        (Some(2), Some(2))
+    );
+    let runs = r["per_run"].as_array().unwrap();
+    assert_eq!(runs.len(), 2);
+    for (run, priority) in runs.iter().zip([1, 2]) {
+        assert_eq!(run["trials"].as_u64(), Some(20 * 4), "{run}");
+        assert_eq!(run["priority"].as_u64(), Some(priority), "{run}");
+    }
+    let u = r["utilisation"].as_f64().unwrap();
+    assert!(u > 0.0 && u <= 1.05, "utilisation {u}");
+    assert!(r["trials_per_s"].as_f64().unwrap() > 0.0, "{r}");
+    assert_eq!(tagged(&tag), Vec::<u32>::new(), "processes left running");
+    assert_eq!(left_in(&dir), Vec::<String>::new(), "files left behind");
+}
+
+/// A bench that gives up (`--timeout-s`) or is stopped by SIGTERM or SIGINT,
+/// sent to it alone, stops its router, workers and coordinators and removes
+/// its scratch directories before it exits 1 saying why. (A timed-out
+/// `bench fleet` used to leave its coordinators running for good, and an
+/// interrupted bench its journals in `/dev/shm` and its keys in /tmp.)
+#[test]
+fn a_bench_that_times_out_or_is_stopped_leaves_nothing_behind() {
+    let dir = scratch("bench-stopped");
+    let fleet = |tag: &str, extra: &[&str]| {
+        let mut cmd = naofarm();
+        cmd.args([
+            "bench",
+            "fleet",
+            "--runs",
+            "2",
+            "--workers",
+            "2",
+            "--slots",
+            "1",
+        ])
+        .args(["--trial-ms", "1000", "--iterations", "100", "--dir"])
+        .arg(&*dir)
+        .args(extra)
+        .env("NAOFARM_E2E_TAG", tag)
+        .stdout(Stdio::null());
+        cmd
+    };
+    let tag = uuid::Uuid::new_v4().to_string();
+    let err = fails(&mut fleet(&tag, &["--timeout-s", "1"]), 1);
+    assert!(
+        err.contains("did not finish within 1 s (--timeout-s)"),
+        "{err}"
+    );
+    assert_eq!(tagged(&tag), Vec::<u32>::new(), "processes left running");
+    assert_eq!(left_in(&dir), Vec::<String>::new(), "files left behind");
+
+    // Stopped once every process it starts is up: the bench, the router,
+    // two workers and two coordinators; TMPDIR where `bench farm` keeps its
+    // run directories and certificates.
+    let tmp = scratch("bench-tmp");
+    for (signal, bench) in [("TERM", "fleet"), ("INT", "farm")] {
+        let tag = uuid::Uuid::new_v4().to_string();
+        let mut cmd = if bench == "fleet" {
+            fleet(&tag, &[])
+        } else {
+            let mut cmd = naofarm();
+            cmd.args(["bench", "farm", "--workers", "4", "--iterations", "100000"])
+                .args(["--nao-iterations", "0", "--tls", "--experiment"])
+                .arg(root().join("experiments/physical-technical.toml"))
+                .env("NAOFARM_E2E_TAG", &tag)
+                .env("TMPDIR", &*tmp)
+                .stdout(Stdio::null());
+            cmd
+        };
+        let mut p = Proc::spawn(&mut cmd, &dir, bench);
+        let deadline = Instant::now() + TIMEOUT;
+        while tagged(&tag).len() < 6 {
+            assert!(
+                Instant::now() < deadline,
+                "{bench}: its processes never came up"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let ok = Command::new("kill")
+            .args([&format!("-{signal}"), &p.child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(ok.success());
+        let status = wait_exit(&mut p);
+        assert_eq!(status.code(), Some(1), "{bench}: {}", p.stderr());
+        assert!(
+            p.stderr().contains(&format!("interrupted by SIG{signal}")),
+            "{}",
+            p.stderr()
+        );
+        assert_eq!(
+            tagged(&tag),
+            Vec::<u32>::new(),
+            "{bench}: processes left running"
+        );
+        let left: Vec<String> = left_in(&dir)
+            .into_iter()
+            .filter(|f| !f.ends_with(".stderr"))
+            .collect();
+        assert_eq!(left, Vec::<String>::new(), "{bench}: files left behind");
+        assert_eq!(
+            left_in(&tmp),
+            Vec::<String>::new(),
+            "{bench}: files left behind"
+        );
+    }
+}

@@ -19,6 +19,7 @@ use worker::nao::{
 use crate::{
     args::{BenchCommand, ClopBenchArgs, FarmBenchArgs, SimBenchArgs},
     common::Failure,
+    crew::Crew,
 };
 
 /// Runs a benchmark.
@@ -130,21 +131,10 @@ fn link_name(tls: bool) -> &'static str {
     }
 }
 
-/// Kills the worker processes however the bench ends.
-struct Workers(Vec<std::process::Child>);
-
-impl Drop for Workers {
-    fn drop(&mut self) {
-        for c in &mut self.0 {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
-}
-
 /// Runs `naofarm coordinator` with `workers` worker processes on a free
 /// loopback port and reads its final JSON line.
 fn farm_case(
+    crew: &Crew,
     experiment: &std::path::Path,
     model: &'static str,
     workers: u32,
@@ -154,11 +144,10 @@ fn farm_case(
     use std::io::{BufRead, BufReader, Read};
     use std::process::{Command, Stdio};
     let exe = std::env::current_exe()?;
-    let out = std::env::temp_dir().join(format!(
-        "naofarm-bench-farm-{}-{model}-{workers}",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_dir_all(&out);
+    // The run's directory, new (the coordinator makes it) in a scratch one.
+    let out = crew
+        .scratch(&std::env::temp_dir(), "naofarm-bench-farm-")?
+        .join("run");
     let started = std::time::Instant::now();
     // The coordinator listens on a port the OS picks and says which.
     let mut coordinator = Command::new(&exe);
@@ -171,21 +160,22 @@ fn farm_case(
     } else {
         "tcp/127.0.0.1:0"
     };
-    let mut coordinator = coordinator
-        .arg(experiment)
-        .arg("--out")
-        .arg(&out)
-        .args(["--json", "--model", model, "--listen", listen])
-        .args(["--iterations", &iterations.to_string()])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()?;
+    let mut coordinator = crew.spawn(
+        coordinator
+            .arg(experiment)
+            .arg("--out")
+            .arg(&out)
+            .args(["--json", "--model", model, "--listen", listen])
+            .args(["--iterations", &iterations.to_string()])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped()),
+    )?;
     let mut err = BufReader::new(coordinator.stderr.take().ok_or_else(|| anyhow!("stderr"))?);
     let mut said = String::new();
     let endpoint = loop {
         let mut line = String::new();
         if err.read_line(&mut line)? == 0 {
-            let _ = coordinator.wait();
+            crew.wait(&coordinator)?;
             return Err(anyhow!("the coordinator failed before listening: {said}"));
         }
         if let Some(ep) = line.strip_prefix("coordinator listening on ") {
@@ -198,24 +188,24 @@ fn farm_case(
         let _ = err.read_to_string(&mut text);
         text
     });
-    let mut pool = Workers(Vec::new());
+    let mut pool = Vec::new();
     for _ in 0..workers {
         let mut w = Command::new(&exe);
         w.args(["worker", "--slots", "1", "--connect", &endpoint]);
         if let Some(pki) = tls {
             w.arg("--tls").arg(pki);
         }
-        pool.0
-            .push(w.stdout(Stdio::null()).stderr(Stdio::null()).spawn()?);
+        pool.push(crew.spawn(w.stdout(Stdio::null()).stderr(Stdio::null()))?);
     }
     let mut stdout = String::new();
     if let Some(mut o) = coordinator.stdout.take() {
         o.read_to_string(&mut stdout)?;
     }
-    let status = coordinator.wait()?;
+    let status = crew.wait(&coordinator)?;
     let wall_s = started.elapsed().as_secs_f64();
-    drop(pool);
-    let _ = std::fs::remove_dir_all(&out);
+    for w in &pool {
+        crew.kill(w);
+    }
     if !status.success() {
         return Err(anyhow!(
             "the coordinator failed ({status}): {said}{}",
@@ -252,10 +242,14 @@ fn farm(a: &FarmBenchArgs) -> Result<(), Failure> {
     // Refuse a bad file before starting any process.
     crate::common::load_experiment(&a.experiment)?;
     let exp = &a.experiment;
+    // Every process and file of the bench goes with it, however it ends.
+    let crew = Crew::new();
     // With --tls: certificates for every role, made as a user makes them.
-    let pki = std::env::temp_dir().join(format!("naofarm-bench-pki-{}", std::process::id()));
+    let pki = crew
+        .scratch(&std::env::temp_dir(), "naofarm-bench-pki-")
+        .map_err(|e| Failure::Job(e.into()))?
+        .join("pki");
     let links: Vec<Option<&std::path::Path>> = if a.tls {
-        let _ = std::fs::remove_dir_all(&pki);
         let made = std::process::Command::new(
             std::env::current_exe().map_err(|e| Failure::Job(e.into()))?,
         )
@@ -277,18 +271,22 @@ fn farm(a: &FarmBenchArgs) -> Result<(), Failure> {
     for &w in &a.workers {
         for &t in &links {
             eprintln!("synthetic, {w} worker(s), {}…", link_name(t.is_some()));
-            rows.push(farm_case(exp, "synthetic", w, a.iterations, t).map_err(Failure::Job)?);
+            rows.push(
+                farm_case(&crew, exp, "synthetic", w, a.iterations, t).map_err(Failure::Job)?,
+            );
         }
     }
     if a.nao_iterations > 0 {
         for w in [1, 2] {
             for &t in &links {
                 eprintln!("nao, {w} worker(s), {}…", link_name(t.is_some()));
-                rows.push(farm_case(exp, "nao", w, a.nao_iterations, t).map_err(Failure::Job)?);
+                rows.push(
+                    farm_case(&crew, exp, "nao", w, a.nao_iterations, t).map_err(Failure::Job)?,
+                );
             }
         }
     }
-    let _ = std::fs::remove_dir_all(&pki);
+    drop(crew);
     if a.json {
         let text = serde_json::to_string_pretty(&rows).map_err(|e| Failure::Job(e.into()))?;
         return crate::common::emit(&format!("{text}\n"));

@@ -10,7 +10,7 @@
 
 use std::{
     io::{BufRead, BufReader},
-    process::{Child, Command, Stdio},
+    process::{Command, Stdio},
     sync::{mpsc, Arc, Mutex},
     time::{Duration, Instant},
 };
@@ -18,19 +18,7 @@ use std::{
 use anyhow::{anyhow, Context};
 use zenoh::Wait;
 
-use crate::{args::FleetBenchArgs, common::Failure};
-
-/// Kills the bench's processes however it ends.
-struct Procs(Vec<Child>);
-
-impl Drop for Procs {
-    fn drop(&mut self) {
-        for c in &mut self.0 {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
-}
+use crate::{args::FleetBenchArgs, common::Failure, crew::Crew};
 
 fn experiment(i: usize, a: &FleetBenchArgs) -> String {
     format!(
@@ -47,14 +35,14 @@ fn experiment(i: usize, a: &FleetBenchArgs) -> String {
 }
 
 /// Starts `naofarm router` on a free loopback port; its endpoint as it reports it.
-fn router(exe: &std::path::Path, procs: &mut Procs) -> anyhow::Result<String> {
-    let mut child = Command::new(exe)
-        .args(["router", "--listen", "tcp/127.0.0.1:0"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()?;
-    let err = child.stderr.take().context("router stderr")?;
-    procs.0.push(child);
+fn router(exe: &std::path::Path, crew: &Crew) -> anyhow::Result<String> {
+    let mut router = crew.spawn(
+        Command::new(exe)
+            .args(["router", "--listen", "tcp/127.0.0.1:0"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped()),
+    )?;
+    let err = router.stderr.take().context("router stderr")?;
     let mut lines = BufReader::new(err).lines();
     for line in lines.by_ref() {
         let line = line?;
@@ -224,27 +212,27 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
             std::env::temp_dir()
         }
     });
-    let dir = base.join(format!("naofarm-bench-fleet-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir)?;
+    // Every process and file of the bench goes with it, however it ends.
+    let crew = Crew::new();
+    let dir = crew
+        .scratch(&base, "naofarm-bench-fleet-")
+        .with_context(|| format!("a scratch directory in {}", base.display()))?;
     eprintln!("journals in {}", dir.display());
-    let mut procs = Procs(Vec::new());
-    let ep = router(&exe, &mut procs)?;
+    let ep = router(&exe, &crew)?;
     eprintln!(
         "router on {ep}; starting {} workers × {} slots…",
         a.workers, a.slots
     );
     for _ in 0..a.workers {
-        procs.0.push(
+        crew.spawn(
             Command::new(&exe)
                 .args(["worker", "--connect", &ep, "--slots", &a.slots.to_string()])
                 .args(["--min-trial-ms", &a.trial_ms.to_string()])
                 .args(["--heartbeat-ms", "1000", "--models", "synthetic"])
                 .env("RUST_LOG", "error")
                 .stdout(Stdio::null())
-                .stderr(Stdio::null())
-                .spawn()?,
-        );
+                .stderr(Stdio::null()),
+        )?;
     }
     // Every trial outcome the coordinators publish, timestamped here.
     let mut zcfg = zenoh::Config::default();
@@ -307,22 +295,22 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
         if let Ok(v) = std::env::var("NAOFARM_BENCH_COORD_ZRT") {
             cmd.env("ZENOH_RUNTIME", v);
         }
-        let mut child = cmd
-            .arg("coordinator")
-            .arg(&exp)
-            .arg("--out")
-            .arg(dir.join(format!("run-{i}")))
-            .args([
-                "--connect",
-                &ep,
-                "--json",
-                "--priority",
-                &priority.to_string(),
-            ])
-            .env("RUST_LOG", "error")
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()?;
+        let mut child = crew.spawn(
+            cmd.arg("coordinator")
+                .arg(&exp)
+                .arg("--out")
+                .arg(dir.join(format!("run-{i}")))
+                .args([
+                    "--connect",
+                    &ep,
+                    "--json",
+                    "--priority",
+                    &priority.to_string(),
+                ])
+                .env("RUST_LOG", "error")
+                .stdout(Stdio::piped())
+                .stderr(Stdio::null()),
+        )?;
         let out = child.stdout.take().context("coordinator stdout")?;
         let tx = tx.clone();
         std::thread::spawn(move || {
@@ -352,13 +340,18 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
                 first_done.get_or_insert_with(Instant::now);
                 finished[i] = Some(v);
             }
-            Err(_) => return Err(anyhow!("the runs did not finish within {} s", a.timeout_s)),
+            Err(_) => {
+                return Err(anyhow!(
+                    "the runs did not finish within {} s (--timeout-s)",
+                    a.timeout_s
+                ))
+            }
         }
     }
-    for (c, _) in &mut coords {
-        let _ = c.wait();
+    for (c, _) in &coords {
+        crew.wait(c)?;
     }
-    drop(procs);
+    drop(crew);
     let _ = session.close().wait();
     let from = started + Duration::from_millis(2 * a.trial_ms);
     let to = first_done.unwrap_or_else(Instant::now);
@@ -496,7 +489,6 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
         worst_fair_share_error: worst_fair,
         per_run,
     };
-    let _ = std::fs::remove_dir_all(&dir);
     if a.json {
         crate::common::emit(&format!("{}\n", serde_json::to_string_pretty(&report)?))
             .map_err(|_| anyhow!("output"))?;
