@@ -280,6 +280,41 @@ fn report_writes_every_figure_and_table_iv_and_leaves_the_run_as_it_was() {
     let e = fails(naofarm().arg("certs").arg(&notes).args(["--host", "x"]), 2);
     assert!(e.contains("exists and is not a directory"), "{e}");
     assert_eq!(std::fs::read_to_string(&notes).unwrap(), "someone's notes");
+    // A directory of someone's files, or a run's, is refused before a byte
+    // is written (one run's report and the page over several alike); a
+    // report's own directory, the default's included, is written again.
+    let site = dir.join("site");
+    std::fs::create_dir(&site).unwrap();
+    std::fs::write(site.join("index.html"), "someone's page").unwrap();
+    for (out, held) in [(&site, "index.html"), (&dir.join("run2"), "journal.nfj")] {
+        let before = tree_bytes(out);
+        for runs in [&["run"][..], &["run", "run2"]] {
+            let mut cmd = naofarm();
+            cmd.arg("report");
+            for r in runs {
+                cmd.arg(dir.join(r));
+            }
+            let e = fails(cmd.arg("--out").arg(out).args(["--trials", "4"]), 2);
+            assert!(
+                e.contains("holds files that are not a naofarm report's") && e.contains(held),
+                "{e}"
+            );
+            assert_eq!(tree_bytes(out), before, "{}", out.display());
+        }
+    }
+    for out in [both.clone(), dir.join("run/report")] {
+        let runs: &[&str] = if out == both {
+            &["run", "run2"]
+        } else {
+            &["run"]
+        };
+        let mut cmd = naofarm();
+        cmd.arg("report");
+        for r in runs {
+            cmd.arg(dir.join(r));
+        }
+        succeed(cmd.arg("--out").arg(&out).args(["--trials", "4"]));
+    }
 }
 
 /// A browser the test can drive: `$NAOFARM_CHROMIUM`, else Debian's.

@@ -67,6 +67,7 @@ pub fn report(
             dirs.len()
         ))),
         (_, Some(out)) => {
+            report_dir(out)?;
             let mut found = Vec::new();
             for (k, dir) in dirs.iter().enumerate() {
                 let view = read(dir)?;
@@ -84,6 +85,49 @@ pub fn report(
             Ok(())
         }
     }
+}
+
+/// The file that marks a directory as a report's, written first into it.
+const MARK: &str = ".naofarm-report";
+
+/// Makes `out` ready for a report: a new directory, an empty one, or an
+/// earlier report's (its mark, or a page by an earlier naofarm), whose files
+/// the report writes again. Any other directory is refused (exit 2) before a
+/// byte is written, so that a report never overwrites files that are not
+/// its own (say someone's `index.html`, or a run directory's).
+fn report_dir(out: &Path) -> Result<(), Failure> {
+    let usage = |why: String| Failure::Usage(anyhow!("--out {}: {why}", out.display()));
+    let io = |e: std::io::Error| Failure::Job(anyhow!("--out {}: {e}", out.display()));
+    if out.is_dir() {
+        let mut names = Vec::new();
+        for entry in std::fs::read_dir(out).map_err(io)? {
+            names.push(entry.map_err(io)?.file_name());
+        }
+        names.sort();
+        let earlier_page = || {
+            use std::io::Read as _;
+            let mut head = Vec::new();
+            std::fs::File::open(out.join("index.html"))
+                .and_then(|f| f.take(1024).read_to_end(&mut head))
+                .is_ok_and(|_| String::from_utf8_lossy(&head).contains("<title>naofarm report"))
+        };
+        if !names.is_empty() && !names.iter().any(|n| n == MARK) && !earlier_page() {
+            let shown: Vec<_> = names.iter().take(3).map(|n| n.to_string_lossy()).collect();
+            return Err(usage(format!(
+                "holds files that are not a naofarm report's ({}{}); give a new or empty \
+                 directory, or an earlier report's",
+                shown.join(", "),
+                if names.len() > 3 { ", …" } else { "" }
+            )));
+        }
+    } else {
+        crate::common::make_dir(out, "--out")?;
+    }
+    std::fs::write(
+        out.join(MARK),
+        "A report of naofarm's: `naofarm report` writes its files here again.\n",
+    )
+    .map_err(io)
 }
 
 /// Reads a run for its report (noting a torn tail).
@@ -104,7 +148,7 @@ fn one(
     let exp = view.experiment.clone();
     let decided = &view.decided;
     let out = out.map_or_else(|| dir.join("report"), Path::to_path_buf);
-    crate::common::make_dir(&out, "--out")?;
+    report_dir(&out)?;
     let write = |name: &str, text: &str| {
         std::fs::write(out.join(name), text)
             .map_err(|e| Failure::Job(anyhow!("{}: {e}", out.join(name).display())))
