@@ -373,3 +373,75 @@ fn a_trial_that_fails_on_every_worker_stops_the_run_with_the_reasons() {
         assert_eq!(history(&out), want, "{mode}");
     }
 }
+
+/// Every file of `dir` (not recursing) with its bytes, by name.
+fn files_of(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut v: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| {
+            let e = e.unwrap();
+            (
+                e.file_name().to_string_lossy().into_owned(),
+                std::fs::read(e.path()).unwrap_or_default(),
+            )
+        })
+        .collect();
+    v.sort();
+    v
+}
+
+/// A run begins only in a new or empty directory (or one where a start
+/// failed before its journal, holding a coordinator's lock alone): `run`,
+/// `coordinator` and `journal salvage` refuse a directory of someone's
+/// files (exit 2, naming them) and leave it as it was, with no lock or
+/// journal of theirs in it. A file of someone's named `lock` used to be
+/// overwritten with the coordinator's pid.
+#[test]
+fn a_run_never_begins_among_someone_elses_files() {
+    let dir = scratch("foreign");
+    let (reference, want) = reference_run(&dir, 3);
+    for (name, text) in [
+        ("notes.txt", "someone's notes"),
+        ("lock", "my lock notes\n"),
+    ] {
+        let theirs = dir.join(format!("theirs-{name}"));
+        std::fs::create_dir(&theirs).unwrap();
+        std::fs::write(theirs.join(name), text).unwrap();
+        let before = files_of(&theirs);
+        let mut coordinator = naofarm();
+        coordinator
+            .args(["coordinator", "--listen", "tcp/127.0.0.1:0"])
+            .arg(synthetic())
+            .arg("--out")
+            .arg(&theirs);
+        let mut salvage = naofarm();
+        salvage
+            .args(["journal", "salvage"])
+            .arg(&reference)
+            .arg("--out")
+            .arg(&theirs);
+        for cmd in [&mut run(&theirs, 3), &mut coordinator, &mut salvage] {
+            let err = fails(cmd, 2);
+            let named = if name == "lock" {
+                "(lock, not a coordinator's)"
+            } else {
+                "(notes.txt)"
+            };
+            assert!(
+                err.contains(&format!(
+                    "{} holds files but no run {named}; a run begins in a new or empty directory",
+                    theirs.display()
+                )),
+                "{err}"
+            );
+            assert_eq!(files_of(&theirs), before, "{cmd:?}");
+        }
+    }
+    // A start that failed before its journal left a coordinator's lock
+    // alone: the run begins there, and it is the run anywhere else.
+    let failed = dir.join("failed");
+    std::fs::create_dir(&failed).unwrap();
+    std::fs::write(failed.join("lock"), "pid 12 on a host\n").unwrap();
+    succeed(&mut run(&failed, 3));
+    assert_eq!(history(&failed), want);
+}

@@ -55,6 +55,28 @@ fn host() -> String {
         .unwrap_or_else(|| "an unknown host".into())
 }
 
+/// Whether `text` is what a coordinator writes into its lock: nothing yet,
+/// or `pid N on HOST` and a newline.
+pub(crate) fn is_lock_text(text: &[u8]) -> bool {
+    let Ok(text) = std::str::from_utf8(text) else {
+        return false;
+    };
+    if text.is_empty() {
+        return true;
+    }
+    let Some(line) = text.strip_suffix('\n') else {
+        return false;
+    };
+    line.strip_prefix("pid ")
+        .and_then(|rest| rest.split_once(" on "))
+        .is_some_and(|(pid, host)| {
+            !pid.is_empty()
+                && pid.bytes().all(|b| b.is_ascii_digit())
+                && !host.is_empty()
+                && !host.contains('\n')
+        })
+}
+
 impl RunLock {
     /// Takes the lock of `dir` (created if missing), or says who holds it.
     pub fn acquire(dir: &Path) -> Result<Self, LockError> {
@@ -139,5 +161,29 @@ mod tests {
         assert!(matches!(e, LockError::NotADirectory(_)), "{e}");
         assert!(e.to_string().contains("is not a directory"), "{e}");
         assert_eq!(std::fs::read(&file).unwrap(), b"someone's notes");
+    }
+
+    /// A lock's text is what `acquire` writes, or nothing yet; anything else
+    /// is someone's file named `lock`.
+    #[test]
+    fn a_locks_text_is_the_pid_and_host_it_writes() {
+        let d = crate::test_dir::test_dir("lock-text");
+        let held = RunLock::acquire(&d).unwrap();
+        assert!(is_lock_text(&std::fs::read(d.join(LOCK_FILE)).unwrap()));
+        drop(held);
+        for ours in ["", "pid 1 on vm\n", "pid 4242 on an unknown host\n"] {
+            assert!(is_lock_text(ours.as_bytes()), "{ours:?}");
+        }
+        for theirs in [
+            "my lock notes\n",
+            "pid 12 on vm",
+            "pid on vm\n",
+            "pid 1x on vm\n",
+            "pid 1 on \n",
+            "pid 1 on vm\nmore\n",
+        ] {
+            assert!(!is_lock_text(theirs.as_bytes()), "{theirs:?}");
+        }
+        assert!(!is_lock_text(&[0xff, 0xfe]));
     }
 }

@@ -82,6 +82,14 @@ pub enum RunError {
         /// What is wrong.
         why: String,
     },
+    /// A run would begin in a directory that holds other files and no run.
+    #[error("{dir} holds files but no run ({names}); a run begins in a new or empty directory")]
+    NotARunDirectory {
+        /// The directory.
+        dir: String,
+        /// The first few of its files, comma-separated.
+        names: String,
+    },
     /// The journal's header holds an experiment this build cannot read.
     #[error("{dir}: the journal's experiment does not parse: {why}")]
     BadHeader {
@@ -232,6 +240,49 @@ fn journaled_experiment(
     Ok((exp, imported.clone()))
 }
 
+/// Refuses to begin a run in `dir` when it holds no journal but files other
+/// than a coordinator's lock (a start that failed before its journal leaves
+/// one): they are someone else's, and a run there would write among them,
+/// its lock over a file of theirs named `lock`. A missing `dir` is fine: the
+/// lock makes it.
+fn refuse_foreign_files(dir: &Path) -> Result<(), RunError> {
+    if !dir.is_dir() || Journal::path_in(dir).exists() {
+        return Ok(());
+    }
+    let io = |cause| {
+        RunError::Journal(JournalError::Io {
+            path: dir.to_path_buf(),
+            cause,
+        })
+    };
+    let mut names = Vec::new();
+    for entry in std::fs::read_dir(dir).map_err(io)? {
+        let entry = entry.map_err(io)?;
+        let name = entry.file_name();
+        let ours = name == crate::lock::LOCK_FILE
+            && entry.file_type().is_ok_and(|t| t.is_file())
+            && entry.metadata().is_ok_and(|m| m.len() <= 4096)
+            && std::fs::read(entry.path()).is_ok_and(|t| crate::lock::is_lock_text(&t));
+        if !ours {
+            let mut shown = name.to_string_lossy().into_owned();
+            if name == crate::lock::LOCK_FILE {
+                shown += ", not a coordinator's";
+            }
+            names.push(shown);
+        }
+    }
+    if names.is_empty() {
+        return Ok(());
+    }
+    names.sort();
+    let more = if names.len() > 3 { ", …" } else { "" };
+    names.truncate(3);
+    Err(RunError::NotARunDirectory {
+        dir: dir.display().to_string(),
+        names: names.join(", ") + more,
+    })
+}
+
 impl Run {
     /// Creates a run in `dir`, or resumes (or extends) the one there. Takes the
     /// directory's lock first; every check happens before any write.
@@ -243,6 +294,7 @@ impl Run {
         exp_text: &str,
         imported: Option<Imported>,
     ) -> Result<(Self, Vec<Effect>), RunError> {
+        refuse_foreign_files(dir)?;
         let lock = RunLock::acquire(dir)?;
         if Journal::path_in(dir).exists() {
             return Self::resume(dir, exp, lock);

@@ -23,6 +23,7 @@ pub fn journal(cmd: JournalCommand) -> Result<(), Failure> {
             let s = salvage(&dir, &out).map_err(|e| match e {
                 RunError::OtherExperiment { .. }
                 | RunError::SalvageOntoJournal(_)
+                | RunError::NotARunDirectory { .. }
                 | RunError::Locked(_) => Failure::Usage(e.into()),
                 e => Failure::Job(e.into()),
             })?;
