@@ -9,6 +9,9 @@ use worker::nao::{model::NaoModel, replay::Replayed, trial};
 
 /// Pixels per metre.
 const SCALE: f64 = 180.0;
+/// The caption every animation has after its title, in its first line: how
+/// `trial --render` knows an earlier animation of its own to write again.
+pub const TRIAL_SVG_CAPTION: &str = "side view above, top view below;";
 /// Record every this many 20 ms cycles (12.5 frames per second).
 pub const EVERY: usize = 4;
 
@@ -39,7 +42,7 @@ pub fn animated_svg(model: &NaoModel, frames: &Frames, title: &str) -> String {
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w:.0}\" height=\"{height:.0}\" \
          viewBox=\"0 0 {w:.0} {height:.0}\"><rect width=\"100%\" height=\"100%\" fill=\"white\"/>\
          <text x=\"4\" y=\"16\" font-family=\"sans-serif\" font-size=\"14\">{title} \
-         (side view above, top view below; {dur:.0} s)</text>"
+         ({TRIAL_SVG_CAPTION} {dur:.0} s)</text>"
     );
     // Side view: ground at z = 0; top view: y up.
     let side = |p: &[f64; 3]| ((p[0] - x0) * SCALE, 24.0 + side_h - p[2] * SCALE);

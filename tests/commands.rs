@@ -884,6 +884,54 @@ fn trial_records_a_replay_of_its_first_trial() {
     assert_eq!(frames, Some(25));
     // A segment per body but the torso, in two views, each with 4 moving ends.
     assert_eq!(text.matches("<animate ").count(), 22 * 2 * 4);
+
+    // An earlier replay or animation is written again (seed 5 now); any
+    // other file, a run's journal say, is refused (exit 2) and kept.
+    let again = |flag: &str, path: &std::path::Path| {
+        let mut cmd = naofarm();
+        cmd.args(["trial", "--trials", "1", "--duration", "1", "--seed", "5"])
+            .arg(flag)
+            .arg(path);
+        cmd
+    };
+    succeed(&mut again("--render", &svg));
+    assert!(std::fs::read_to_string(&svg).unwrap().contains("seed 5"));
+    succeed(&mut again("--record", &f));
+    let header: serde_json::Value =
+        serde_json::from_str(std::fs::read_to_string(&f).unwrap().lines().next().unwrap()).unwrap();
+    assert_eq!(header["seed"], 5);
+    let journal = dir.join("journal.nfj");
+    std::fs::write(&journal, b"NAOFARMJ\x02\x00\x00\x00 someone's run").unwrap();
+    let page = dir.join("page.svg");
+    std::fs::write(
+        &page,
+        "<svg xmlns=\"http://www.w3.org/2000/svg\">mine</svg>",
+    )
+    .unwrap();
+    for (flag, path, what) in [
+        ("--record", &journal, "a naofarm replay"),
+        ("--render", &page, "a naofarm trial animation"),
+        ("--record", &svg, "a naofarm replay"),
+        ("--render", &f, "a naofarm trial animation"),
+    ] {
+        let before = std::fs::read(path).unwrap();
+        let err = fails(&mut again(flag, path), 2);
+        assert!(
+            err.contains(&format!(
+                "{flag} {}: exists and is not {what}; give a new path",
+                path.display()
+            )),
+            "{err}"
+        );
+        assert_eq!(
+            std::fs::read(path).unwrap(),
+            before,
+            "{flag} {}",
+            path.display()
+        );
+    }
+    let err = fails(&mut again("--record", &dir), 2);
+    assert!(err.contains("exists and is not a file"), "{err}");
 }
 
 #[test]

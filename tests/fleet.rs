@@ -1315,6 +1315,20 @@ fn left_in(dir: &Path) -> Vec<String> {
         .collect()
 }
 
+/// `bench fleet` of 2 runs on 2 workers of `slots` slots, trials of
+/// `trial_ms`, `iterations` a run, its journals in `dir`, tagged `tag` (see
+/// [`tagged`]).
+fn bench_fleet(dir: &Path, tag: &str, slots: u32, trial_ms: u64, iterations: u64) -> Command {
+    let mut cmd = naofarm();
+    cmd.args(["bench", "fleet", "--runs", "2", "--workers", "2"])
+        .args(["--slots", &slots.to_string()])
+        .args(["--trial-ms", &trial_ms.to_string()])
+        .args(["--iterations", &iterations.to_string(), "--dir"])
+        .arg(dir)
+        .env("NAOFARM_E2E_TAG", tag);
+    cmd
+}
+
 /// `bench fleet` on a small fleet (2 runs, a router, 2 workers of 2 slots)
 /// measures every run to its end and, once it has printed, leaves no
 /// process it started and nothing in the directory its journals went to.
@@ -1322,23 +1336,10 @@ fn left_in(dir: &Path) -> Vec<String> {
 fn bench_fleet_measures_a_small_fleet_and_leaves_nothing_behind() {
     let dir = scratch("bench-fleet");
     let tag = uuid::Uuid::new_v4().to_string();
-    let out = succeed(
-        naofarm()
-            .args([
-                "bench",
-                "fleet",
-                "--runs",
-                "2",
-                "--workers",
-                "2",
-                "--slots",
-                "2",
-            ])
-            .args(["--trial-ms", "20", "--iterations", "20", "--trials", "4"])
-            .args(["--depth", "2", "--priorities", "1,2", "--json", "--dir"])
-            .arg(&*dir)
-            .env("NAOFARM_E2E_TAG", &tag),
-    );
+    let mut cmd = bench_fleet(&dir, &tag, 2, 20, 20);
+    cmd.args(["--trials", "4", "--depth", "2"])
+        .args(["--priorities", "1,2", "--json"]);
+    let out = succeed(&mut cmd);
     let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(
         (r["runs"].as_u64(), r["workers"].as_u64()),
@@ -1366,22 +1367,8 @@ fn bench_fleet_measures_a_small_fleet_and_leaves_nothing_behind() {
 fn a_bench_that_times_out_or_is_stopped_leaves_nothing_behind() {
     let dir = scratch("bench-stopped");
     let fleet = |tag: &str, extra: &[&str]| {
-        let mut cmd = naofarm();
-        cmd.args([
-            "bench",
-            "fleet",
-            "--runs",
-            "2",
-            "--workers",
-            "2",
-            "--slots",
-            "1",
-        ])
-        .args(["--trial-ms", "1000", "--iterations", "100", "--dir"])
-        .arg(&*dir)
-        .args(extra)
-        .env("NAOFARM_E2E_TAG", tag)
-        .stdout(Stdio::null());
+        let mut cmd = bench_fleet(&dir, tag, 1, 1000, 100);
+        cmd.args(extra).stdout(Stdio::null());
         cmd
     };
     let tag = uuid::Uuid::new_v4().to_string();

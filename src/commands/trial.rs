@@ -505,10 +505,48 @@ fn params_json(params: &[(String, f64)]) -> serde_json::Map<String, serde_json::
         .collect()
 }
 
+/// Refuses (exit 2) to write `flag`'s `path` over a file that `ours` does
+/// not recognise, by its first 64 KiB, as one this command wrote (`what`):
+/// a new path, or an earlier replay or animation, is written; anything else
+/// (a journal, someone's file) keeps its bytes.
+fn ours_to_write(
+    path: &std::path::Path,
+    flag: &str,
+    what: &str,
+    ours: impl Fn(&[u8]) -> bool,
+) -> Result<(), Failure> {
+    use std::io::Read as _;
+    let Ok(meta) = std::fs::metadata(path) else {
+        return Ok(());
+    };
+    let usage = |why: &str| Failure::Usage(anyhow!("--{} {}: {why}", &flag[2..], path.display()));
+    if !meta.is_file() {
+        return Err(usage("exists and is not a file"));
+    }
+    let mut head = Vec::new();
+    std::fs::File::open(path)
+        .and_then(|f| f.take(64 * 1024).read_to_end(&mut head))
+        .map_err(|e| usage(&e.to_string()))?;
+    if meta.len() > 0 && !ours(&head) {
+        return Err(usage(&format!(
+            "exists and is not {what}; give a new path (it is kept as it is)"
+        )));
+    }
+    Ok(())
+}
+
 /// Writes the replay of one trial: a header line (robot type, seed,
 /// parameters, body names and shapes), then one line per cycle with the time
 /// and every body's centre pose (x, y, z, qx, qy, qz, qw; world frame, m).
 fn record(path: &std::path::Path, what: &Replayed<'_>) -> Result<(), Failure> {
+    ours_to_write(path, "--record", "a naofarm replay", |head| {
+        let line = head.split(|&b| b == b'\n').next().unwrap_or_default();
+        serde_json::from_slice::<serde_json::Value>(line).is_ok_and(|h| {
+            ["robot_type", "seed", "cycle_s", "bodies", "joints"]
+                .iter()
+                .all(|k| h.get(k).is_some())
+        })
+    })?;
     let file = std::fs::File::create(path)
         .map_err(|e| Failure::Usage(anyhow!("--record {}: {e}", path.display())))?;
     let mut out = std::io::BufWriter::new(file);
@@ -526,6 +564,10 @@ fn record(path: &std::path::Path, what: &Replayed<'_>) -> Result<(), Failure> {
 
 /// Writes the animated SVG of one trial.
 fn render(path: &std::path::Path, what: &Replayed<'_>, title: &str) -> Result<(), Failure> {
+    ours_to_write(path, "--render", "a naofarm trial animation", |head| {
+        head.starts_with(b"<svg ")
+            && String::from_utf8_lossy(head).contains(crate::render::TRIAL_SVG_CAPTION)
+    })?;
     let svg = crate::render::trial_svg(what, title)
         .map_err(|e| Failure::Job(anyhow!("--render {}: {e}", path.display())))?;
     std::fs::write(path, svg)
