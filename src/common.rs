@@ -58,6 +58,23 @@ pub fn make_dir(dir: &Path, what: &str) -> Result<(), Failure> {
         .map_err(|e| Failure::Job(anyhow::anyhow!("{what} {}: {e}", dir.display())))
 }
 
+/// A usage error (exit 2), `FLAG VALUE: must be in LO..=HI`, unless `value`
+/// lies in `range`.
+pub fn flag_in<T: PartialOrd + std::fmt::Display>(
+    flag: &str,
+    value: T,
+    range: std::ops::RangeInclusive<T>,
+) -> Result<(), Failure> {
+    if range.contains(&value) {
+        return Ok(());
+    }
+    Err(Failure::Usage(anyhow::anyhow!(
+        "{flag} {value}: must be in {}..={}",
+        range.start(),
+        range.end()
+    )))
+}
+
 /// Reads a UTF-8 text file of at most `max` bytes; a longer one is an error
 /// that says so, read no further than `max + 1` bytes.
 fn read_bounded(path: &Path, max: u64) -> anyhow::Result<String> {

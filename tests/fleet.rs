@@ -1372,6 +1372,24 @@ fn a_bench_that_times_out_or_is_stopped_leaves_nothing_behind() {
         cmd
     };
     let tag = uuid::Uuid::new_v4().to_string();
+    // A bad number is a usage error naming its flag, before anything starts.
+    for (flag, value, range) in [
+        ("--runs", "0", "1..=200"),
+        ("--slots", "300", "1..=256"),
+        ("--trials", "20000", "1..=10000"),
+        ("--depth", "0", "1..=1000"),
+        ("--priorities", "0", "1..=1000"),
+    ] {
+        let mut cmd = naofarm();
+        cmd.args(["bench", "fleet", flag, value, "--dir"])
+            .arg(&*dir);
+        let err = fails(&mut cmd, 2);
+        assert!(
+            err.contains(&format!("{flag} {value}: must be in {range}")),
+            "{err}"
+        );
+    }
+    assert_eq!(left_in(&dir), Vec::<String>::new(), "files left behind");
     let err = fails(&mut fleet(&tag, &["--timeout-s", "1"]), 1);
     assert!(
         err.contains("did not finish within 1 s (--timeout-s)"),

@@ -234,11 +234,11 @@ fn farm_case(
 }
 
 fn farm(a: &FarmBenchArgs) -> Result<(), Failure> {
-    if a.workers.iter().any(|&w| w == 0 || w > 256) || a.iterations == 0 {
-        return Err(Failure::Usage(anyhow!(
-            "--workers must be in 1..=256 and --iterations at least 1"
-        )));
+    for &w in &a.workers {
+        crate::common::flag_in("--workers", w, 1..=256)?;
     }
+    crate::common::flag_in("--iterations", a.iterations, 1..=10_000_000)?;
+    crate::common::flag_in("--nao-iterations", a.nao_iterations, 0..=10_000_000)?;
     // Refuse a bad file before starting any process.
     crate::common::load_experiment(&a.experiment)?;
     let exp = &a.experiment;

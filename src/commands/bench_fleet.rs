@@ -18,7 +18,11 @@ use std::{
 use anyhow::{anyhow, Context};
 use zenoh::Wait;
 
-use crate::{args::FleetBenchArgs, common::Failure, crew::Crew};
+use crate::{
+    args::FleetBenchArgs,
+    common::{flag_in, Failure},
+    crew::Crew,
+};
 
 fn experiment(i: usize, a: &FleetBenchArgs) -> String {
     format!(
@@ -180,23 +184,19 @@ struct Report {
 /// `naofarm bench fleet`.
 #[allow(clippy::too_many_lines, clippy::cast_precision_loss)]
 pub fn fleet(a: &FleetBenchArgs) -> Result<(), Failure> {
-    if a.runs == 0 || a.runs > 200 || a.workers == 0 || a.workers > 1000 {
-        return Err(Failure::Usage(anyhow!(
-            "--runs must be in 1..=200 and --workers in 1..=1000"
-        )));
+    // The experiment file's bounds for what the runs' files take.
+    flag_in("--runs", a.runs, 1..=200)?;
+    flag_in("--workers", a.workers, 1..=1000)?;
+    flag_in("--slots", a.slots, 1..=256)?;
+    flag_in("--trial-ms", a.trial_ms, 1..=60_000)?;
+    flag_in("--iterations", a.iterations, 1..=10_000_000)?;
+    flag_in("--trials", a.trials, 1..=10_000)?;
+    flag_in("--depth", a.depth, 1..=1000)?;
+    if a.priorities.is_empty() {
+        return Err(Failure::Usage(anyhow!("--priorities: give at least one")));
     }
-    if a.slots == 0 || a.slots > 256 || a.trial_ms == 0 || a.trial_ms > 60_000 {
-        return Err(Failure::Usage(anyhow!(
-            "--slots must be in 1..=256 and --trial-ms in 1..=60000"
-        )));
-    }
-    if a.priorities.is_empty() || a.priorities.iter().any(|&p| p == 0 || p > 1000) {
-        return Err(Failure::Usage(anyhow!("--priorities: each in 1..=1000")));
-    }
-    if a.iterations == 0 || a.trials == 0 || a.depth == 0 {
-        return Err(Failure::Usage(anyhow!(
-            "--iterations, --trials and --depth must be at least 1"
-        )));
+    for &p in &a.priorities {
+        flag_in("--priorities", p, 1..=1000)?;
     }
     run(a).map_err(Failure::Job)
 }
@@ -340,10 +340,17 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
                 first_done.get_or_insert_with(Instant::now);
                 finished[i] = Some(v);
             }
-            Err(_) => {
+            Err(mpsc::RecvTimeoutError::Timeout) => {
                 return Err(anyhow!(
                     "the runs did not finish within {} s (--timeout-s)",
                     a.timeout_s
+                ))
+            }
+            Err(mpsc::RecvTimeoutError::Disconnected) => {
+                return Err(anyhow!(
+                    "a coordinator ended before its run finished (run {} of {})",
+                    finished.iter().position(Option::is_none).unwrap_or(0) + 1,
+                    a.runs
                 ))
             }
         }
