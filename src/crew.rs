@@ -1,9 +1,10 @@
 //! What a bench starts and makes — its processes (router, workers,
 //! coordinators) and scratch directories — taken down with it: when the
 //! bench returns, with a result or an error, and when SIGINT or SIGTERM
-//! ends it. Without this, a bench that timed out left its coordinators
-//! running against a router that was gone, and an interrupted one left its
-//! journals in `/dev/shm`.
+//! ends it; its processes also when SIGKILL does (they shut down when
+//! their standard input, a pipe the crew holds, ends). Without this, a bench
+//! that timed out left its coordinators running against a router that was
+//! gone, and an interrupted one left its journals in `/dev/shm`.
 
 use std::{
     path::{Path, PathBuf},
@@ -63,10 +64,16 @@ impl Crew {
             .unwrap_or_else(std::sync::PoisonError::into_inner)
     }
 
-    /// Starts `cmd` as one of the crew.
+    /// Starts `cmd` as one of the crew. Its standard input is a pipe the
+    /// crew holds and never writes: if the bench ends without taking the crew
+    /// down (SIGKILL), the pipe's end tells the process to shut down
+    /// ([`crate::serve::EXIT_WITH_STDIN`]).
     pub fn spawn(&self, cmd: &mut Command) -> std::io::Result<Member> {
         let mut inner = self.lock();
-        let mut child = cmd.spawn()?;
+        let mut child = cmd
+            .stdin(std::process::Stdio::piped())
+            .env(crate::serve::EXIT_WITH_STDIN, "1")
+            .spawn()?;
         let id = inner.next;
         inner.next += 1;
         let member = Member {

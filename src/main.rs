@@ -34,6 +34,12 @@ fn main() -> ExitCode {
     ) {
         compact_zenoh_runtime();
     }
+    if matches!(
+        args.command,
+        Command::Coordinator { .. } | Command::Worker { .. } | Command::Router { .. }
+    ) {
+        serve::watch_stdin();
+    }
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {

@@ -30,29 +30,71 @@ pub fn runtime_with(threads: usize) -> Result<tokio::runtime::Runtime, Failure> 
         .map_err(|e| Failure::Job(e.into()))
 }
 
-/// A shutdown channel that turns true on SIGINT or SIGTERM.
+/// The variable with which a bench starts its processes (`crate::crew`):
+/// such a process also shuts down, as on SIGTERM, when its standard input
+/// ends, that is when the bench holding the pipe's other end is gone,
+/// however it ended (SIGKILL included); see [`watch_stdin`].
+pub const EXIT_WITH_STDIN: &str = "NAOFARM_EXIT_WITH_STDIN";
+
+/// How long a process whose standard input ended has to shut down before it
+/// exits anyway (one still connecting, say, to a router that is gone).
+const STDIN_GRACE: Duration = Duration::from_secs(10);
+
+/// Whether standard input has ended, for [`signals`].
+fn stdin_ended() -> &'static tokio::sync::watch::Sender<bool> {
+    static ENDED: std::sync::OnceLock<tokio::sync::watch::Sender<bool>> =
+        std::sync::OnceLock::new();
+    ENDED.get_or_init(|| tokio::sync::watch::channel(false).0)
+}
+
+/// With [`EXIT_WITH_STDIN`] set, a thread that reads standard input (and
+/// throws it away) until it ends; then [`signals`] turns true, and if the
+/// process is still there [`STDIN_GRACE`] later, it exits (1). Called first
+/// by `coordinator`, `worker` and `router`.
+pub fn watch_stdin() {
+    if std::env::var_os(EXIT_WITH_STDIN).is_none() {
+        return;
+    }
+    let ended = stdin_ended();
+    std::thread::spawn(move || {
+        let _ = std::io::copy(&mut std::io::stdin().lock(), &mut std::io::sink());
+        ended.send_replace(true);
+        std::thread::sleep(STDIN_GRACE);
+        eprintln!(
+            "error: standard input ended ({EXIT_WITH_STDIN}: the process that started this one \
+             is gone) and this process had not stopped {} s later",
+            STDIN_GRACE.as_secs()
+        );
+        std::process::exit(1);
+    });
+}
+
+/// A shutdown channel that turns true on SIGINT or SIGTERM (or, with
+/// [`EXIT_WITH_STDIN`] set, when standard input ends).
 pub fn signals() -> tokio::sync::watch::Receiver<bool> {
     let (tx, rx) = tokio::sync::watch::channel(false);
+    let mut ended = stdin_ended().subscribe();
     tokio::spawn(async move {
+        let orphaned = async move {
+            let _ = ended.wait_for(|ended| *ended).await;
+        };
         let ctrl_c = tokio::signal::ctrl_c();
         #[cfg(unix)]
+        if let Ok(mut term) =
+            tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
         {
-            let mut term =
-                match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
-                    Ok(t) => t,
-                    Err(_) => {
-                        let _ = ctrl_c.await;
-                        let _ = tx.send(true);
-                        return;
-                    }
-                };
             tokio::select! {
                 _ = ctrl_c => {}
                 _ = term.recv() => {}
+                () = orphaned => {}
             }
+            let _ = tx.send(true);
+            return;
         }
-        #[cfg(not(unix))]
-        let _ = ctrl_c.await;
+        tokio::select! {
+            _ = ctrl_c => {}
+            () = orphaned => {}
+        }
         let _ = tx.send(true);
     });
     rx

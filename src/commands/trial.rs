@@ -519,7 +519,7 @@ fn ours_to_write(
     let Ok(meta) = std::fs::metadata(path) else {
         return Ok(());
     };
-    let usage = |why: &str| Failure::Usage(anyhow!("--{} {}: {why}", &flag[2..], path.display()));
+    let usage = |why: &str| Failure::Usage(anyhow!("{flag} {}: {why}", path.display()));
     if !meta.is_file() {
         return Err(usage("exists and is not a file"));
     }
