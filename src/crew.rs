@@ -140,21 +140,7 @@ fn watch_signals(crew: &Weak<Mutex<Inner>>) {
         // No watcher: the signals keep their default action.
         return;
     };
-    let name = rt.block_on(async {
-        let ctrl_c = tokio::signal::ctrl_c();
-        #[cfg(unix)]
-        {
-            use tokio::signal::unix::{signal, SignalKind};
-            if let Ok(mut term) = signal(SignalKind::terminate()) {
-                return tokio::select! {
-                    _ = ctrl_c => "SIGINT",
-                    _ = term.recv() => "SIGTERM",
-                };
-            }
-        }
-        let _ = ctrl_c.await;
-        "SIGINT"
-    });
+    let name = rt.block_on(crate::serve::interrupted());
     // Held to the end: the bench's own threads wait rather than go on with
     // processes that are gone.
     let inner = crew.upgrade();

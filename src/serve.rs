@@ -75,29 +75,30 @@ pub fn signals() -> tokio::sync::watch::Receiver<bool> {
     let (tx, rx) = tokio::sync::watch::channel(false);
     let mut ended = stdin_ended().subscribe();
     tokio::spawn(async move {
-        let orphaned = async move {
-            let _ = ended.wait_for(|ended| *ended).await;
-        };
-        let ctrl_c = tokio::signal::ctrl_c();
-        #[cfg(unix)]
-        if let Ok(mut term) =
-            tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
-        {
-            tokio::select! {
-                _ = ctrl_c => {}
-                _ = term.recv() => {}
-                () = orphaned => {}
-            }
-            let _ = tx.send(true);
-            return;
-        }
         tokio::select! {
-            _ = ctrl_c => {}
-            () = orphaned => {}
+            _ = interrupted() => {}
+            _ = ended.wait_for(|ended| *ended) => {}
         }
         let _ = tx.send(true);
     });
     rx
+}
+
+/// Waits for SIGINT or SIGTERM and names the one that came.
+pub async fn interrupted() -> &'static str {
+    let ctrl_c = tokio::signal::ctrl_c();
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{signal, SignalKind};
+        if let Ok(mut term) = signal(SignalKind::terminate()) {
+            return tokio::select! {
+                _ = ctrl_c => "SIGINT",
+                _ = term.recv() => "SIGTERM",
+            };
+        }
+    }
+    let _ = ctrl_c.await;
+    "SIGINT"
 }
 
 /// A run checked and ready to serve. A coordinator opens its zenoh session

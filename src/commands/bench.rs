@@ -245,11 +245,11 @@ fn farm(a: &FarmBenchArgs) -> Result<(), Failure> {
     // Every process and file of the bench goes with it, however it ends.
     let crew = Crew::new();
     // With --tls: certificates for every role, made as a user makes them.
-    let pki = crew
-        .scratch(&std::env::temp_dir(), "naofarm-bench-pki-")
-        .map_err(|e| Failure::Job(e.into()))?
-        .join("pki");
-    let links: Vec<Option<&std::path::Path>> = if a.tls {
+    let pki = if a.tls {
+        let pki = crew
+            .scratch(&std::env::temp_dir(), "naofarm-bench-pki-")
+            .map_err(|e| Failure::Job(e.into()))?
+            .join("pki");
         let made = std::process::Command::new(
             std::env::current_exe().map_err(|e| Failure::Job(e.into()))?,
         )
@@ -263,10 +263,13 @@ fn farm(a: &FarmBenchArgs) -> Result<(), Failure> {
                 String::from_utf8_lossy(&made.stderr)
             )));
         }
-        vec![None, Some(pki.as_path())]
+        Some(pki)
     } else {
-        vec![None]
+        None
     };
+    let links: Vec<Option<&std::path::Path>> = std::iter::once(None)
+        .chain(pki.as_deref().map(Some))
+        .collect();
     let mut rows = Vec::new();
     for &w in &a.workers {
         for &t in &links {
