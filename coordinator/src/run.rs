@@ -275,12 +275,18 @@ fn refuse_foreign_files(dir: &Path) -> Result<(), RunError> {
         return Ok(());
     }
     names.sort();
-    let more = if names.len() > 3 { ", …" } else { "" };
-    names.truncate(3);
     Err(RunError::NotARunDirectory {
         dir: dir.display().to_string(),
-        names: names.join(", ") + more,
+        names: first_names(&names),
     })
+}
+
+/// The first three of `names` (sorted by the caller), comma-separated, with
+/// ", …" when there are more: how a refusal names the files it found.
+#[must_use]
+pub fn first_names<S: AsRef<str>>(names: &[S]) -> String {
+    let shown: Vec<&str> = names.iter().take(3).map(AsRef::as_ref).collect();
+    shown.join(", ") + if names.len() > 3 { ", …" } else { "" }
 }
 
 impl Run {
@@ -1137,6 +1143,13 @@ mod tests {
         drive_local(&mut run, effects, &synthetic, &mut order).unwrap();
         assert!(run.evolve().finished());
         run.evolve().history().to_vec()
+    }
+
+    #[test]
+    fn a_refusal_names_the_first_three_files_and_says_when_there_are_more() {
+        assert_eq!(first_names::<&str>(&[]), "");
+        assert_eq!(first_names(&["a", "b", "c"]), "a, b, c");
+        assert_eq!(first_names(&["a", "b", "c", "d"]), "a, b, c, …");
     }
 
     #[test]

@@ -112,12 +112,11 @@ fn report_dir(out: &Path) -> Result<(), Failure> {
                 .is_ok_and(|_| String::from_utf8_lossy(&head).contains("<title>naofarm report"))
         };
         if !names.is_empty() && !names.iter().any(|n| n == MARK) && !earlier_page() {
-            let shown: Vec<_> = names.iter().take(3).map(|n| n.to_string_lossy()).collect();
+            let names: Vec<_> = names.iter().map(|n| n.to_string_lossy()).collect();
             return Err(usage(format!(
-                "holds files that are not a naofarm report's ({}{}); give a new or empty \
+                "holds files that are not a naofarm report's ({}); give a new or empty \
                  directory, or an earlier report's",
-                shown.join(", "),
-                if names.len() > 3 { ", …" } else { "" }
+                coordinator::run::first_names(&names)
             )));
         }
     } else {
