@@ -239,6 +239,7 @@ impl NewRun {
             Run::open(&self.out, self.exp, &self.text, self.imported).map_err(|e| match e {
                 coordinator::run::RunError::OtherExperiment { .. }
                 | coordinator::run::RunError::NotARunDirectory { .. }
+                | coordinator::run::RunError::InsideARun { .. }
                 | coordinator::run::RunError::Locked(_)
                 | coordinator::run::RunError::Diverged { .. } => Failure::Usage(e.into()),
                 e => Failure::Job(e.into()),

@@ -445,3 +445,62 @@ fn a_run_never_begins_among_someone_elses_files() {
     succeed(&mut run(&failed, 3));
     assert_eq!(history(&failed), want);
 }
+
+/// A new run is never made inside another run's directory, where removing
+/// that run (say once `journal salvage` has copied it, which says it is
+/// unchanged) would remove the new one with it: `run`, `coordinator` and
+/// `journal salvage` refuse it (exit 2, naming the run), through `..` too,
+/// and make nothing there. A run already inside one is resumed.
+#[test]
+fn a_new_run_is_never_made_inside_another_run() {
+    let dir = scratch("nested");
+    let (reference, want) = reference_run(&dir, 3);
+    let before = files_of(&reference);
+    let real = reference.canonicalize().unwrap();
+    for inner in [
+        reference.join("salvaged"),
+        reference.join("a").join("b"),
+        reference.join("a").join("..").join("c"),
+    ] {
+        let mut coordinator = naofarm();
+        coordinator
+            .args(["coordinator", "--listen", "tcp/127.0.0.1:0"])
+            .arg(synthetic())
+            .arg("--out")
+            .arg(&inner);
+        let mut salvage = naofarm();
+        salvage
+            .args(["journal", "salvage"])
+            .arg(&reference)
+            .arg("--out")
+            .arg(&inner);
+        for cmd in [&mut run(&inner, 3), &mut coordinator, &mut salvage] {
+            let err = fails(cmd, 2);
+            assert!(
+                err.contains(&format!(
+                    "{} is inside the run directory {}; a new run goes beside another run",
+                    inner.display(),
+                    real.display()
+                )),
+                "{err}"
+            );
+            assert_eq!(files_of(&reference), before, "{cmd:?}");
+        }
+    }
+    // Beside it, salvage makes the run; and a run that is inside another
+    // already (a copy put there by hand) is resumed, as it is.
+    let beside = dir.join("salvaged");
+    succeed(
+        naofarm()
+            .args(["journal", "salvage"])
+            .arg(&reference)
+            .arg("--out")
+            .arg(&beside),
+    );
+    assert_eq!(history(&beside), want);
+    let copy = reference.join("copy");
+    std::fs::create_dir(&copy).unwrap();
+    std::fs::copy(journal(&beside), journal(&copy)).unwrap();
+    succeed(&mut run(&copy, 3));
+    assert_eq!(history(&copy), want);
+}

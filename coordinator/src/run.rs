@@ -90,6 +90,17 @@ pub enum RunError {
         /// The first few of its files, comma-separated.
         names: String,
     },
+    /// A new run would begin inside another run's directory.
+    #[error(
+        "{dir} is inside the run directory {run}; a new run goes beside another run, never \
+         inside it (removing that run would remove this one with it)"
+    )]
+    InsideARun {
+        /// The directory asked for.
+        dir: String,
+        /// The run directory it is inside.
+        run: String,
+    },
     /// The journal's header holds an experiment this build cannot read.
     #[error("{dir}: the journal's experiment does not parse: {why}")]
     BadHeader {
@@ -281,6 +292,32 @@ fn refuse_foreign_files(dir: &Path) -> Result<(), RunError> {
     })
 }
 
+/// Refuses to begin a run in `dir` when a directory above it holds a run's
+/// journal: removing that run (say once `journal salvage` has copied it)
+/// would remove the new one with it. A run already in `dir` is resumed
+/// wherever it is.
+fn refuse_inside_a_run(dir: &Path) -> Result<(), RunError> {
+    if Journal::path_in(dir).exists() {
+        return Ok(());
+    }
+    // The nearest part of the path that exists, resolved (`..`, links).
+    let Some(real) = dir
+        .ancestors()
+        .filter(|a| !a.as_os_str().is_empty())
+        .find_map(|a| a.canonicalize().ok())
+        .or_else(|| std::env::current_dir().ok())
+    else {
+        return Ok(());
+    };
+    match real.ancestors().find(|a| Journal::path_in(a).is_file()) {
+        Some(run) => Err(RunError::InsideARun {
+            dir: dir.display().to_string(),
+            run: run.display().to_string(),
+        }),
+        None => Ok(()),
+    }
+}
+
 /// The first three of `names` (sorted by the caller), comma-separated, with
 /// ", …" when there are more: how a refusal names the files it found.
 #[must_use]
@@ -301,6 +338,7 @@ impl Run {
         imported: Option<Imported>,
     ) -> Result<(Self, Vec<Effect>), RunError> {
         refuse_foreign_files(dir)?;
+        refuse_inside_a_run(dir)?;
         let lock = RunLock::acquire(dir)?;
         if Journal::path_in(dir).exists() {
             return Self::resume(dir, exp, lock);

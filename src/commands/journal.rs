@@ -24,6 +24,7 @@ pub fn journal(cmd: JournalCommand) -> Result<(), Failure> {
                 RunError::OtherExperiment { .. }
                 | RunError::SalvageOntoJournal(_)
                 | RunError::NotARunDirectory { .. }
+                | RunError::InsideARun { .. }
                 | RunError::Locked(_) => Failure::Usage(e.into()),
                 e => Failure::Job(e.into()),
             })?;
