@@ -374,6 +374,24 @@ fn a_trial_that_fails_on_every_worker_stops_the_run_with_the_reasons() {
     }
 }
 
+/// The three commands that begin a run in `out`: `run`, `coordinator` and
+/// `journal salvage` of `reference`.
+fn starts(out: &Path, reference: &Path) -> [std::process::Command; 3] {
+    let mut coordinator = naofarm();
+    coordinator
+        .args(["coordinator", "--listen", "tcp/127.0.0.1:0"])
+        .arg(synthetic())
+        .arg("--out")
+        .arg(out);
+    let mut salvage = naofarm();
+    salvage
+        .args(["journal", "salvage"])
+        .arg(reference)
+        .arg("--out")
+        .arg(out);
+    [run(out, 3), coordinator, salvage]
+}
+
 /// Every file of `dir` (not recursing) with its bytes, by name.
 fn files_of(dir: &Path) -> Vec<(String, Vec<u8>)> {
     let mut v: Vec<_> = std::fs::read_dir(dir)
@@ -408,19 +426,7 @@ fn a_run_never_begins_among_someone_elses_files() {
         std::fs::create_dir(&theirs).unwrap();
         std::fs::write(theirs.join(name), text).unwrap();
         let before = files_of(&theirs);
-        let mut coordinator = naofarm();
-        coordinator
-            .args(["coordinator", "--listen", "tcp/127.0.0.1:0"])
-            .arg(synthetic())
-            .arg("--out")
-            .arg(&theirs);
-        let mut salvage = naofarm();
-        salvage
-            .args(["journal", "salvage"])
-            .arg(&reference)
-            .arg("--out")
-            .arg(&theirs);
-        for cmd in [&mut run(&theirs, 3), &mut coordinator, &mut salvage] {
+        for cmd in &mut starts(&theirs, &reference) {
             let err = fails(cmd, 2);
             let named = if name == "lock" {
                 "(lock, not a coordinator's)"
@@ -462,19 +468,7 @@ fn a_new_run_is_never_made_inside_another_run() {
         reference.join("a").join("b"),
         reference.join("a").join("..").join("c"),
     ] {
-        let mut coordinator = naofarm();
-        coordinator
-            .args(["coordinator", "--listen", "tcp/127.0.0.1:0"])
-            .arg(synthetic())
-            .arg("--out")
-            .arg(&inner);
-        let mut salvage = naofarm();
-        salvage
-            .args(["journal", "salvage"])
-            .arg(&reference)
-            .arg("--out")
-            .arg(&inner);
-        for cmd in [&mut run(&inner, 3), &mut coordinator, &mut salvage] {
+        for cmd in &mut starts(&inner, &reference) {
             let err = fails(cmd, 2);
             assert!(
                 err.contains(&format!(
