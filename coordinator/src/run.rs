@@ -251,13 +251,13 @@ fn journaled_experiment(
     Ok((exp, imported.clone()))
 }
 
-/// Refuses to begin a run in `dir` when it holds no journal but files other
-/// than a coordinator's lock (a start that failed before its journal leaves
-/// one): they are someone else's, and a run there would write among them,
-/// its lock over a file of theirs named `lock`. A missing `dir` is fine: the
-/// lock makes it.
+/// Refuses to begin a new run in `dir` (it holds no journal) when it holds
+/// files other than a coordinator's lock (a start that failed before its
+/// journal leaves one): they are someone else's, and a run there would write
+/// among them, its lock over a file of theirs named `lock`. A missing `dir`
+/// is fine: the lock makes it.
 fn refuse_foreign_files(dir: &Path) -> Result<(), RunError> {
-    if !dir.is_dir() || Journal::path_in(dir).exists() {
+    if !dir.is_dir() {
         return Ok(());
     }
     let io = |cause| {
@@ -292,14 +292,12 @@ fn refuse_foreign_files(dir: &Path) -> Result<(), RunError> {
     })
 }
 
-/// Refuses to begin a run in `dir` when a directory above it holds a run's
-/// journal: removing that run (say once `journal salvage` has copied it)
-/// would remove the new one with it. A run already in `dir` is resumed
-/// wherever it is.
+/// Refuses to begin a new run in `dir` (it holds no journal) when a
+/// directory above it holds a run's journal: removing that run (say once
+/// `journal salvage` has copied it) would remove the new one with it. A run
+/// already in `dir` is resumed wherever it is: [`Run::open`] asks only for
+/// a new one.
 fn refuse_inside_a_run(dir: &Path) -> Result<(), RunError> {
-    if Journal::path_in(dir).exists() {
-        return Ok(());
-    }
     // The nearest part of the path that exists, resolved (`..`, links).
     let Some(real) = dir
         .ancestors()
@@ -337,8 +335,11 @@ impl Run {
         exp_text: &str,
         imported: Option<Imported>,
     ) -> Result<(Self, Vec<Effect>), RunError> {
-        refuse_foreign_files(dir)?;
-        refuse_inside_a_run(dir)?;
+        if !Journal::path_in(dir).exists() {
+            // A new run begins only where it harms nothing of anyone's.
+            refuse_foreign_files(dir)?;
+            refuse_inside_a_run(dir)?;
+        }
         let lock = RunLock::acquire(dir)?;
         if Journal::path_in(dir).exists() {
             return Self::resume(dir, exp, lock);

@@ -267,9 +267,11 @@ fn farm(a: &FarmBenchArgs) -> Result<(), Failure> {
     } else {
         None
     };
-    let links: Vec<Option<&std::path::Path>> = std::iter::once(None)
-        .chain(pki.as_deref().map(Some))
-        .collect();
+    // Plain TCP, and TLS when asked for.
+    let mut links: Vec<Option<&std::path::Path>> = vec![None];
+    if let Some(pki) = &pki {
+        links.push(Some(pki));
+    }
     let mut rows = Vec::new();
     for &w in &a.workers {
         for &t in &links {
