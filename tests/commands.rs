@@ -701,7 +701,7 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
     }
     // A feedback gain on the open loop, which has no feedback: refused by
     // name rather than ignored.
-    for gain in ["hip_pitch_gain", "step_aim"] {
+    for gain in ["hip_pitch_gain", "step_aim", "lean_place"] {
         let err = fails(
             naofarm().args(["trial", "--trials", "1", "--param", &format!("{gain}=0.3")]),
             2,

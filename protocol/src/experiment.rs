@@ -118,7 +118,8 @@ pub enum WalkEngine {
     ClosedLoop,
 }
 
-/// A feedback gain (`hip_pitch_gain`, `ankle_pitch_gain`, `turn_place`, `step_aim`) needs a walk with
+/// A feedback gain (`hip_pitch_gain`, `ankle_pitch_gain`, `turn_place`, `step_aim`,
+/// `lean_place`) needs a walk with
 /// feedback: the open loop has none to give it to, so a parameter set for it
 /// that names one is refused (by an experiment file and by `naofarm trial`).
 pub fn gain_has_feedback(walk: WalkEngine, name: &str) -> Result<(), String> {
@@ -129,6 +130,7 @@ pub fn gain_has_feedback(walk: WalkEngine, name: &str) -> Result<(), String> {
                 | params::Param::AnklePitchGain
                 | params::Param::TurnPlace
                 | params::Param::StepAim
+                | params::Param::LeanPlace
         )
     });
     if gain && walk == WalkEngine::OpenLoop {

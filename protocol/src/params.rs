@@ -60,6 +60,8 @@ pub enum Param {
     StepReach,
     /// `step_aim`.
     StepAim,
+    /// `lean_place`.
+    LeanPlace,
 }
 
 impl Param {
@@ -297,6 +299,17 @@ pub const KNOWN: &[KnownParam] = &[
         unit: "1",
         default: 0.0,
         doc: "each step's share in the closed loop's estimate of how far the legs land past their aim (sensed feet spacing over aimed, at each step's end); the plan is aimed short by it so the feet land its steps; not given, the closed-loop engine's own (0: aimed as planned)",
+    },
+    // Where a torso leaning forward puts the feet.
+    KnownParam {
+        param: Param::LeanPlace,
+        name: "lean_place",
+        role: Role::Walk,
+        min: 0.0,
+        max: 2.0,
+        unit: "rad/rad",
+        default: 0.0,
+        doc: "a foot placed against this share of the torso's sensed forward lean, in the share its load leaves it (1: a foot in the air where the plan has it in the walk's frame); a torso leaning back moves no foot; not given, the closed-loop engine's own (0: in the torso's frame)",
     },
 ];
 

@@ -26,8 +26,8 @@ use crate::{
 /// trial request's physics carries `firm_stop_window_deg`; 10 since
 /// `turn_place` joined the registry; 11 since a trial request's physics
 /// carries `substeps_max`; 12 since `step_reach` joined the registry; 13
-/// since `step_aim` joined it.
-pub const WIRE_VERSION: u8 = 13;
+/// since `step_aim` joined it; 14 since `lean_place` joined it.
+pub const WIRE_VERSION: u8 = 14;
 /// Largest message accepted, in bytes (checked before any allocation).
 pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
 const MAGIC: [u8; 2] = *b"NF";

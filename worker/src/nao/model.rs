@@ -196,7 +196,8 @@ impl Morphology {
             | Param::ArmSwing
             | Param::TurnPlace
             | Param::StepReach
-            | Param::StepAim => None,
+            | Param::StepAim
+            | Param::LeanPlace => None,
         }
     }
 

@@ -458,12 +458,13 @@ pub fn run_observed(
                 if let Some(pacing) = paced.as_mut() {
                     landing = pacing.gauge.touchdown(&sensed);
                 }
-                // The plan's targets, or with the feet placed against the turn.
+                // The plan's targets, or with the feet placed against the turn and
+                // the forward lean.
                 let turned;
-                let planned = if c.turn == 0.0 {
+                let planned = if c.turn == 0.0 && c.lean == [0.0; 2] {
                     &q_next
                 } else {
-                    turned = gait.targets_of(&rest, &next, c.turn);
+                    turned = gait.targets_placed(&rest, &next, c.turn, c.lean);
                     &turned
                 };
                 Some(gait.corrected(planned, &c))

@@ -550,14 +550,17 @@ impl Gait {
     /// le1..le6, with the stance hip-roll compensation.
     #[must_use]
     pub fn leg_targets(&self, t: f64) -> [[f64; 6]; 2] {
-        self.legs_at(&self.state(t), 0.0)
+        self.legs_at(&self.state(t), 0.0, [0.0; 2])
     }
 
     /// [`Gait::leg_targets`] for the gait's state `st` at some time, each
     /// foot's place about the hip midpoint turned by `-turn` (rad) about the
     /// vertical: a torso turned by `turn` then puts the feet where the plan
-    /// has them (0: the plan's own, exactly).
-    fn legs_at(&self, st: &GaitState, turn: f64) -> [[f64; 6]; 2] {
+    /// has them (0: the plan's own, exactly); and each foot's place about
+    /// its hip turned by `pitch[side]` (rad) about the lateral axis: a torso
+    /// pitched forward by `pitch` then puts that foot where the plan has it
+    /// (0: the plan's own, exactly).
+    fn legs_at(&self, st: &GaitState, turn: f64, pitch: [f64; 2]) -> [[f64; 6]; 2] {
         let mut out = [[0.0; 6]; 2];
         for (side, o) in out.iter_mut().enumerate() {
             let y = if side == 0 {
@@ -573,7 +576,16 @@ impl Gait {
                 let (s, c) = libm::sincos(turn);
                 (c * dx + s * dy, c * dy - s * dx)
             };
-            let p = [dx, dy - y, f[2] - st.hip[2]];
+            let dz = f[2] - st.hip[2];
+            let (dx, dz) = if pitch[side] == 0.0 {
+                (dx, dz)
+            } else {
+                // The plan's (dx, dz) seen from a torso pitched forward
+                // (about +y) by pitch: turned back by it.
+                let (s, c) = libm::sincos(pitch[side]);
+                (c * dx - s * dz, s * dx + c * dz)
+            };
+            let p = [dx, dy - y, dz];
             *o = if self.cfg.yaw_pitch_rad == 0.0 {
                 leg_ik(p, &self.leg)
             } else {
@@ -612,7 +624,20 @@ impl Gait {
     /// own at some time, or one [`Paced`] from it).
     #[must_use]
     pub fn targets_of(&self, rest: &[f64], st: &GaitState, turn: f64) -> Vec<f64> {
-        let legs = self.legs_at(st, turn);
+        self.targets_placed(rest, st, turn, [0.0; 2])
+    }
+
+    /// [`Gait::targets_of`] with each foot placed against a torso pitched
+    /// by `pitch[side]` too (rad; `pitch_place`).
+    #[must_use]
+    pub fn targets_placed(
+        &self,
+        rest: &[f64],
+        st: &GaitState,
+        turn: f64,
+        pitch: [f64; 2],
+    ) -> Vec<f64> {
+        let legs = self.legs_at(st, turn, pitch);
         let mut q = rest.to_vec();
         if self.cfg.arm_swing_rad != 0.0 {
             // How far the left foot leads the right, in step lengths.
@@ -864,7 +889,7 @@ mod tests {
             assert_eq!(g.targets_turned(&rest, t, 0.0), g.targets(&rest, t));
             let st = g.state(t);
             for turn in [-0.3, -0.1, 0.12, 0.25] {
-                let legs = g.legs_at(&st, turn);
+                let legs = g.legs_at(&st, turn, [0.0; 2]);
                 let back = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), turn);
                 for (side, leg) in legs.iter().enumerate() {
                     let Some((at, _)) = foot_of(&model, &g.leg, side, leg) else {
@@ -889,6 +914,63 @@ mod tests {
             }
         }
         assert!(checked >= 280, "only {checked} of 320 reachable");
+    }
+
+    /// Legs placed against a pitched torso (`lean_place`) put each foot
+    /// where the plan has it in the walk's frame: forward kinematics of the
+    /// pitched legs, pitched with the torso, lands on the plan's foot (about
+    /// its hip); each side is placed by its own angle, and 0 is the plan's
+    /// own targets, bit for bit.
+    #[test]
+    fn pitched_legs_put_the_feet_where_the_plan_has_them() {
+        let model = NaoModel::new(Morphology::of_type(0).unwrap()).unwrap();
+        let cfg = GaitConfig {
+            hip_roll_comp_rad: 0.0,
+            ..crate::nao::balance::GAIT
+        };
+        let g = Gait::with_config(&model, WalkParams::EXPERT, 3.0, cfg);
+        let rest = crate::nao::sim::standing_angles(&model);
+        let mut checked = 0;
+        for i in 0..40 {
+            let t = 0.6 + 0.037 * f64::from(i);
+            let st = g.state(t);
+            assert_eq!(
+                g.targets_placed(&rest, &st, 0.0, [0.0; 2]),
+                g.targets(&rest, t)
+            );
+            for pitch in [0.05, 0.12, 0.25] {
+                for placed in 0..2 {
+                    let mut by = [0.0; 2];
+                    by[placed] = pitch;
+                    let legs = g.legs_at(&st, 0.0, by);
+                    let plain = g.legs_at(&st, 0.0, [0.0; 2]);
+                    // The other side is the plan's, exactly.
+                    assert_eq!(legs[1 - placed], plain[1 - placed]);
+                    let Some((at, _)) = foot_of(&model, &g.leg, placed, &legs[placed]) else {
+                        continue;
+                    };
+                    let y = if placed == 0 {
+                        g.leg.hip[1]
+                    } else {
+                        -g.leg.hip[1]
+                    };
+                    let tilt = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), pitch);
+                    let walk = tilt * Vector3::new(at[0], at[1] + y, at[2]);
+                    let f = st.feet[placed];
+                    let plan = [f[0] - st.hip[0], f[1] - st.hip[1], f[2] - st.hip[2]];
+                    for k in 0..3 {
+                        assert!(
+                            (walk[k] - plan[k]).abs() < 1e-6,
+                            "t {t} pitch {pitch} side {placed}: {walk:?} against {plan:?}"
+                        );
+                    }
+                    // Pitched forward, the foot's target moves ahead of the plan's.
+                    assert!(at[0] > plan[0], "t {t} pitch {pitch}: {at:?}");
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked >= 200, "only {checked} of 240 reachable");
     }
 
     /// The lift's shapes (`--engine lift_peak`, `lift_end`) peak where asked
