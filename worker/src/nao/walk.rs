@@ -870,12 +870,10 @@ mod tests {
         }
     }
 
-    /// Legs placed against a turned torso (`turn_place`) put both feet where
-    /// the plan has them in the walk's frame: forward kinematics of the
-    /// turned legs, turned back with the torso, lands on the plan's feet;
-    /// and a turn of 0 is the plan's own targets, bit for bit.
-    #[test]
-    fn turned_legs_put_the_feet_where_the_plan_has_them() {
+    /// The closed loop's expert plan without its stance hip-roll
+    /// compensation (which turns a leg away from its IK), for the placing
+    /// tests: the model, the gait, the rest posture.
+    fn placing_gait() -> (NaoModel, Gait, Vec<f64>) {
         let model = NaoModel::new(Morphology::of_type(0).unwrap()).unwrap();
         let cfg = GaitConfig {
             hip_roll_comp_rad: 0.0,
@@ -883,6 +881,41 @@ mod tests {
         };
         let g = Gait::with_config(&model, WalkParams::EXPERT, 3.0, cfg);
         let rest = crate::nao::sim::standing_angles(&model);
+        (model, g, rest)
+    }
+
+    /// Where `side`'s leg angles `leg` put its foot about the hip midpoint
+    /// once the torso is turned by `torso` (forward kinematics, then the
+    /// torso's turn), and where the plan's state `st` has it; None when an
+    /// angle is past its stops.
+    fn placed_foot(
+        model: &NaoModel,
+        g: &Gait,
+        st: &GaitState,
+        side: usize,
+        leg: &[f64; 6],
+        torso: UnitQuaternion<f64>,
+    ) -> Option<(Vector3<f64>, [f64; 3])> {
+        let (at, _) = foot_of(model, &g.leg, side, leg)?;
+        let y = if side == 0 {
+            g.leg.hip[1]
+        } else {
+            -g.leg.hip[1]
+        };
+        let f = st.feet[side];
+        Some((
+            torso * Vector3::new(at[0], at[1] + y, at[2]),
+            [f[0] - st.hip[0], f[1] - st.hip[1], f[2] - st.hip[2]],
+        ))
+    }
+
+    /// Legs placed against a turned torso (`turn_place`) put both feet where
+    /// the plan has them in the walk's frame: forward kinematics of the
+    /// turned legs, turned back with the torso, lands on the plan's feet;
+    /// and a turn of 0 is the plan's own targets, bit for bit.
+    #[test]
+    fn turned_legs_put_the_feet_where_the_plan_has_them() {
+        let (model, g, rest) = placing_gait();
         let mut checked = 0;
         for i in 0..40 {
             let t = 0.6 + 0.037 * f64::from(i);
@@ -892,17 +925,9 @@ mod tests {
                 let legs = g.legs_at(&st, turn, [0.0; 2]);
                 let back = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), turn);
                 for (side, leg) in legs.iter().enumerate() {
-                    let Some((at, _)) = foot_of(&model, &g.leg, side, leg) else {
+                    let Some((walk, plan)) = placed_foot(&model, &g, &st, side, leg, back) else {
                         continue;
                     };
-                    let y = if side == 0 {
-                        g.leg.hip[1]
-                    } else {
-                        -g.leg.hip[1]
-                    };
-                    let walk = back * Vector3::new(at[0], at[1] + y, at[2]);
-                    let f = st.feet[side];
-                    let plan = [f[0] - st.hip[0], f[1] - st.hip[1], f[2] - st.hip[2]];
                     for k in 0..3 {
                         assert!(
                             (walk[k] - plan[k]).abs() < 1e-6,
@@ -923,13 +948,7 @@ mod tests {
     /// own targets, bit for bit.
     #[test]
     fn pitched_legs_put_the_feet_where_the_plan_has_them() {
-        let model = NaoModel::new(Morphology::of_type(0).unwrap()).unwrap();
-        let cfg = GaitConfig {
-            hip_roll_comp_rad: 0.0,
-            ..crate::nao::balance::GAIT
-        };
-        let g = Gait::with_config(&model, WalkParams::EXPERT, 3.0, cfg);
-        let rest = crate::nao::sim::standing_angles(&model);
+        let (model, g, rest) = placing_gait();
         let mut checked = 0;
         for i in 0..40 {
             let t = 0.6 + 0.037 * f64::from(i);
@@ -946,18 +965,12 @@ mod tests {
                     let plain = g.legs_at(&st, 0.0, [0.0; 2]);
                     // The other side is the plan's, exactly.
                     assert_eq!(legs[1 - placed], plain[1 - placed]);
-                    let Some((at, _)) = foot_of(&model, &g.leg, placed, &legs[placed]) else {
+                    let tilt = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), pitch);
+                    let Some((walk, plan)) =
+                        placed_foot(&model, &g, &st, placed, &legs[placed], tilt)
+                    else {
                         continue;
                     };
-                    let y = if placed == 0 {
-                        g.leg.hip[1]
-                    } else {
-                        -g.leg.hip[1]
-                    };
-                    let tilt = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), pitch);
-                    let walk = tilt * Vector3::new(at[0], at[1] + y, at[2]);
-                    let f = st.feet[placed];
-                    let plan = [f[0] - st.hip[0], f[1] - st.hip[1], f[2] - st.hip[2]];
                     for k in 0..3 {
                         assert!(
                             (walk[k] - plan[k]).abs() < 1e-6,
@@ -965,6 +978,7 @@ mod tests {
                         );
                     }
                     // Pitched forward, the foot's target moves ahead of the plan's.
+                    let at = tilt.inverse() * walk;
                     assert!(at[0] > plan[0], "t {t} pitch {pitch}: {at:?}");
                     checked += 1;
                 }
