@@ -1063,6 +1063,7 @@ fn bench_sim_reports_its_shares_over_rounds() {
         "closed_loop",
         "arms_5ms",
         "arms_5ms_roll",
+        "arms_5ms_roll_aim_lean",
         "arms",
         "firm",
         "band",
