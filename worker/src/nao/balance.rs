@@ -357,14 +357,9 @@ impl Balance {
             c.turn = g.turn_place * self.turn;
         }
         if g.lean_place != 0.0 {
-            // A foot in the air (or both, in flight) placed in full; a torso
-            // leaning back (the walk's own posture) moves no foot.
-            let unloaded = if l + r > 1.0 {
-                [1.0 - share[0], 1.0 - share[1]]
-            } else {
-                [1.0; 2]
-            };
-            c.lean = unloaded.map(|u| g.lean_place * u * pitch.max(0.0));
+            // A foot in the air (or both, in flight: no share) placed in
+            // full; a torso leaning back (the walk's own posture) moves no foot.
+            c.lean = share.map(|w| g.lean_place * (1.0 - w) * pitch.max(0.0));
         }
         c
     }
@@ -447,6 +442,21 @@ mod tests {
         walked
     }
 
+    /// What a torso at rest senses: the accelerometer reading `accel`, the
+    /// feet's vertical loads `loads` (left, right), nothing turning.
+    fn still(accel: [f64; 3], loads: [f64; 2]) -> crate::nao::sim::Perception {
+        crate::nao::sim::Perception {
+            time_s: 0.0,
+            joint_angles_rad: Vec::new(),
+            gyro_rad_s: [0.0; 3],
+            accel_m_s2: accel,
+            foot_force_n: [[0.0, 0.0, loads[0]], [0.0, 0.0, loads[1]]],
+            torso_position_m: [0.0; 3],
+            torso_rotation: [0.0, 0.0, 0.0, 1.0],
+            torso_tilt_rad: 0.0,
+        }
+    }
+
     /// `lean_place` places a foot against the sensed forward lean in the
     /// share of the load it does not carry (both in full in the air), a
     /// torso leaning back moves no foot, and off it is exactly nothing.
@@ -460,16 +470,7 @@ mod tests {
             });
             // Gravity seen from a torso pitched by `pitch`, held until the
             // estimate has settled on it.
-            let p = crate::nao::sim::Perception {
-                time_s: 0.0,
-                joint_angles_rad: Vec::new(),
-                gyro_rad_s: [0.0; 3],
-                accel_m_s2: [-9.81 * pitch.sin(), 0.0, 9.81 * pitch.cos()],
-                foot_force_n: [[0.0, 0.0, loads[0]], [0.0, 0.0, loads[1]]],
-                torso_position_m: [0.0; 3],
-                torso_rotation: [0.0, 0.0, 0.0, 1.0],
-                torso_tilt_rad: 0.0,
-            };
+            let p = still([-9.81 * pitch.sin(), 0.0, 9.81 * pitch.cos()], loads);
             let mut c = Correction::default();
             for _ in 0..500 {
                 c = b.update(&p, 0.02);
@@ -522,16 +523,7 @@ mod tests {
         assert_eq!(g.pace(), PACE_MIN);
         // Touchdowns, from the sensed loads.
         let mut g = StepGauge::new(0.3);
-        let mut p = crate::nao::sim::Perception {
-            time_s: 0.0,
-            joint_angles_rad: Vec::new(),
-            gyro_rad_s: [0.0; 3],
-            accel_m_s2: [0.0, 0.0, 9.81],
-            foot_force_n: [[0.0; 3]; 2],
-            torso_position_m: [0.0; 3],
-            torso_rotation: [0.0, 0.0, 0.0, 1.0],
-            torso_tilt_rad: 0.0,
-        };
+        let mut p = still([0.0, 0.0, 9.81], [0.0; 2]);
         let mut load = |g: &mut StepGauge, left: f64, right: f64| {
             p.foot_force_n[0][2] = left;
             p.foot_force_n[1][2] = right;

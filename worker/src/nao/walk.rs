@@ -628,7 +628,7 @@ impl Gait {
     }
 
     /// [`Gait::targets_of`] with each foot placed against a torso pitched
-    /// by `pitch[side]` too (rad; `pitch_place`).
+    /// by `pitch[side]` too (rad; `lean_place`).
     #[must_use]
     pub fn targets_placed(
         &self,
