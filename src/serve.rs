@@ -127,7 +127,8 @@ pub struct NewRun {
 /// Reads and checks the experiment, the flags and `--from` (exit 2 on a bad
 /// one), writing nothing for a new run. An `--out` that exists is opened
 /// here (a run resumed; a lock another coordinator holds, another
-/// experiment, or a file exits 2 before any network).
+/// experiment, or a file exits 2 before any network), and a new one inside
+/// another run's directory is refused here too.
 pub fn prepare_run(job: &JobArgs) -> Result<Prepared, Failure> {
     let (mut exp, text) = load_experiment(&job.experiment)?;
     if let Some(n) = job.iterations {
@@ -211,6 +212,9 @@ pub fn prepare_run(job: &JobArgs) -> Result<Prepared, Failure> {
     if job.out.exists() {
         return Ok(Prepared::Resumed(Box::new(new.open()?)));
     }
+    // Inside another run's directory: refused before any network, as an
+    // `--out` that exists is (`Run::open` asks again once the session is open).
+    coordinator::run::refuse_new_run_at(&job.out).map_err(|e| Failure::Usage(e.into()))?;
     Ok(Prepared::New(Box::new(new)))
 }
 

@@ -375,11 +375,19 @@ fn a_trial_that_fails_on_every_worker_stops_the_run_with_the_reasons() {
 }
 
 /// The three commands that begin a run in `out`: `run`, `coordinator` and
-/// `journal salvage` of `reference`.
-fn starts(out: &Path, reference: &Path) -> [std::process::Command; 3] {
+/// `journal salvage` of `reference`. `run` and `coordinator` listen on
+/// `held`, a port someone else holds: a refusal that waited for the network
+/// would fail there instead (exit 1, "zenoh: …"), so what they say shows
+/// they refused first.
+fn starts(
+    out: &Path,
+    reference: &Path,
+    held: &std::net::TcpListener,
+) -> [std::process::Command; 3] {
+    let ep = format!("tcp/127.0.0.1:{}", held.local_addr().unwrap().port());
     let mut coordinator = naofarm();
     coordinator
-        .args(["coordinator", "--listen", "tcp/127.0.0.1:0"])
+        .args(["coordinator", "--listen", &ep])
         .arg(synthetic())
         .arg("--out")
         .arg(out);
@@ -389,7 +397,9 @@ fn starts(out: &Path, reference: &Path) -> [std::process::Command; 3] {
         .arg(reference)
         .arg("--out")
         .arg(out);
-    [run(out, 3), coordinator, salvage]
+    let mut run = run(out, 3);
+    run.args(["--listen", &ep]);
+    [run, coordinator, salvage]
 }
 
 /// Every file of `dir` (not recursing) with its bytes, by name.
@@ -411,13 +421,15 @@ fn files_of(dir: &Path) -> Vec<(String, Vec<u8>)> {
 /// A run begins only in a new or empty directory (or one where a start
 /// failed before its journal, holding a coordinator's lock alone): `run`,
 /// `coordinator` and `journal salvage` refuse a directory of someone's
-/// files (exit 2, naming them) and leave it as it was, with no lock or
+/// files (exit 2, naming them; before they touch the network) and leave it
+/// as it was, with no lock or
 /// journal of theirs in it. A file of someone's named `lock` used to be
 /// overwritten with the coordinator's pid.
 #[test]
 fn a_run_never_begins_among_someone_elses_files() {
     let dir = scratch("foreign");
     let (reference, want) = reference_run(&dir, 3);
+    let held = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     for (name, text) in [
         ("notes.txt", "someone's notes"),
         ("lock", "my lock notes\n"),
@@ -426,7 +438,7 @@ fn a_run_never_begins_among_someone_elses_files() {
         std::fs::create_dir(&theirs).unwrap();
         std::fs::write(theirs.join(name), text).unwrap();
         let before = files_of(&theirs);
-        for cmd in &mut starts(&theirs, &reference) {
+        for cmd in &mut starts(&theirs, &reference, &held) {
             let err = fails(cmd, 2);
             let named = if name == "lock" {
                 "(lock, not a coordinator's)"
@@ -456,11 +468,13 @@ fn a_run_never_begins_among_someone_elses_files() {
 /// that run (say once `journal salvage` has copied it, which says it is
 /// unchanged) would remove the new one with it: `run`, `coordinator` and
 /// `journal salvage` refuse it (exit 2, naming the run), through `..` too,
-/// and make nothing there. A run already inside one is resumed.
+/// before they touch the network, and make nothing there. A run already
+/// inside one is resumed.
 #[test]
 fn a_new_run_is_never_made_inside_another_run() {
     let dir = scratch("nested");
     let (reference, want) = reference_run(&dir, 3);
+    let held = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let before = files_of(&reference);
     let real = reference.canonicalize().unwrap();
     for inner in [
@@ -468,7 +482,7 @@ fn a_new_run_is_never_made_inside_another_run() {
         reference.join("a").join("b"),
         reference.join("a").join("..").join("c"),
     ] {
-        for cmd in &mut starts(&inner, &reference) {
+        for cmd in &mut starts(&inner, &reference, &held) {
             let err = fails(cmd, 2);
             assert!(
                 err.contains(&format!(

@@ -316,6 +316,15 @@ fn refuse_inside_a_run(dir: &Path) -> Result<(), RunError> {
     }
 }
 
+/// Refuses to begin a new run in `dir` where it would harm something of
+/// anyone's: among someone else's files, or inside another run's directory.
+/// [`Run::open`] asks it for every new run; a start may ask it earlier, before
+/// it touches the network, so that the refusal comes first. Writes nothing.
+pub fn refuse_new_run_at(dir: &Path) -> Result<(), RunError> {
+    refuse_foreign_files(dir)?;
+    refuse_inside_a_run(dir)
+}
+
 /// The first three of `names` (sorted by the caller), comma-separated, with
 /// ", …" when there are more: how a refusal names the files it found.
 #[must_use]
@@ -336,9 +345,7 @@ impl Run {
         imported: Option<Imported>,
     ) -> Result<(Self, Vec<Effect>), RunError> {
         if !Journal::path_in(dir).exists() {
-            // A new run begins only where it harms nothing of anyone's.
-            refuse_foreign_files(dir)?;
-            refuse_inside_a_run(dir)?;
+            refuse_new_run_at(dir)?;
         }
         let lock = RunLock::acquire(dir)?;
         if Journal::path_in(dir).exists() {
