@@ -214,7 +214,7 @@ pub fn prepare_run(job: &JobArgs) -> Result<Prepared, Failure> {
     }
     // Inside another run's directory: refused before any network, as an
     // `--out` that exists is (`Run::open` asks again once the session is open).
-    coordinator::run::refuse_new_run_at(&job.out).map_err(|e| Failure::Usage(e.into()))?;
+    coordinator::run::refuse_new_run_at(&job.out).map_err(open_failure)?;
     Ok(Prepared::New(Box::new(new)))
 }
 
@@ -240,14 +240,7 @@ impl NewRun {
     /// Makes the run directory and its journal, or resumes the run in it.
     pub fn open(self) -> Result<(Run, Vec<coordinator::run::Effect>), Failure> {
         let mut opened =
-            Run::open(&self.out, self.exp, &self.text, self.imported).map_err(|e| match e {
-                coordinator::run::RunError::OtherExperiment { .. }
-                | coordinator::run::RunError::NotARunDirectory { .. }
-                | coordinator::run::RunError::InsideARun { .. }
-                | coordinator::run::RunError::Locked(_)
-                | coordinator::run::RunError::Diverged { .. } => Failure::Usage(e.into()),
-                e => Failure::Job(e.into()),
-            })?;
+            Run::open(&self.out, self.exp, &self.text, self.imported).map_err(open_failure)?;
         opened.0.set_failure_limit(self.failure_limit);
         if let Some(action) = self.priority {
             opened
@@ -263,6 +256,23 @@ impl NewRun {
             );
         }
         Ok(opened)
+    }
+}
+
+/// How a run that cannot be opened fails: exit 2 for an `--out` that is
+/// not this run's to begin or resume (another experiment, someone's files,
+/// inside another run, held by another coordinator, a journal this build
+/// replays otherwise), 1
+/// for the rest (a damaged journal, an I/O error).
+fn open_failure(e: coordinator::run::RunError) -> Failure {
+    use coordinator::run::RunError as E;
+    match e {
+        E::OtherExperiment { .. }
+        | E::NotARunDirectory { .. }
+        | E::InsideARun { .. }
+        | E::Locked(_)
+        | E::Diverged { .. } => Failure::Usage(e.into()),
+        e => Failure::Job(e.into()),
     }
 }
 
