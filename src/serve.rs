@@ -262,8 +262,7 @@ impl NewRun {
 /// How a run that cannot be opened fails: exit 2 for an `--out` that is
 /// not this run's to begin or resume (another experiment, someone's files,
 /// inside another run, held by another coordinator, a journal this build
-/// replays otherwise), 1
-/// for the rest (a damaged journal, an I/O error).
+/// replays otherwise), 1 for the rest (a damaged journal, an I/O error).
 fn open_failure(e: coordinator::run::RunError) -> Failure {
     use coordinator::run::RunError as E;
     match e {
