@@ -448,7 +448,7 @@ pub fn run_observed(
                 pacing.plan.state(&gait, t + CYCLE_S, pace)
             }
         };
-        let q_next = gait.targets_of(&rest, &next, 0.0);
+        let q_next = gait.targets_of(&rest, &next, 0.0, [0.0; 2]);
         let mut landing = None;
         let aim = match balance.as_mut() {
             None => None,
@@ -464,7 +464,7 @@ pub fn run_observed(
                 let planned = if c.turn == 0.0 && c.lean == [0.0; 2] {
                     &q_next
                 } else {
-                    turned = gait.targets_placed(&rest, &next, c.turn, c.lean);
+                    turned = gait.targets_of(&rest, &next, c.turn, c.lean);
                     &turned
                 };
                 Some(gait.corrected(planned, &c))

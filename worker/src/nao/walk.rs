@@ -617,26 +617,15 @@ impl Gait {
     /// where the plan has them.
     #[must_use]
     pub fn targets_turned(&self, rest: &[f64], t: f64, turn: f64) -> Vec<f64> {
-        self.targets_of(rest, &self.state(t), turn)
+        self.targets_of(rest, &self.state(t), turn, [0.0; 2])
     }
 
     /// [`Gait::targets_turned`] for a state `st` of this gait (the plan's
-    /// own at some time, or one [`Paced`] from it).
+    /// own at some time, or one [`Paced`] from it), each foot placed against
+    /// a torso pitched by `pitch[side]` too (rad; `lean_place`; 0: the
+    /// plan's own, exactly).
     #[must_use]
-    pub fn targets_of(&self, rest: &[f64], st: &GaitState, turn: f64) -> Vec<f64> {
-        self.targets_placed(rest, st, turn, [0.0; 2])
-    }
-
-    /// [`Gait::targets_of`] with each foot placed against a torso pitched
-    /// by `pitch[side]` too (rad; `lean_place`).
-    #[must_use]
-    pub fn targets_placed(
-        &self,
-        rest: &[f64],
-        st: &GaitState,
-        turn: f64,
-        pitch: [f64; 2],
-    ) -> Vec<f64> {
+    pub fn targets_of(&self, rest: &[f64], st: &GaitState, turn: f64, pitch: [f64; 2]) -> Vec<f64> {
         let legs = self.legs_at(st, turn, pitch);
         let mut q = rest.to_vec();
         if self.cfg.arm_swing_rad != 0.0 {
@@ -909,6 +898,17 @@ mod tests {
         ))
     }
 
+    /// Asserts a placed foot (`walk`, from [`placed_foot`]) lands on the
+    /// plan's (`plan`) within 1 µm on every axis; `what` names the case.
+    fn assert_lands(walk: &Vector3<f64>, plan: &[f64; 3], what: &str) {
+        for k in 0..3 {
+            assert!(
+                (walk[k] - plan[k]).abs() < 1e-6,
+                "{what}: {walk:?} against {plan:?}"
+            );
+        }
+    }
+
     /// Legs placed against a turned torso (`turn_place`) put both feet where
     /// the plan has them in the walk's frame: forward kinematics of the
     /// turned legs, turned back with the torso, lands on the plan's feet;
@@ -928,12 +928,7 @@ mod tests {
                     let Some((walk, plan)) = placed_foot(&model, &g, &st, side, leg, back) else {
                         continue;
                     };
-                    for k in 0..3 {
-                        assert!(
-                            (walk[k] - plan[k]).abs() < 1e-6,
-                            "t {t} turn {turn} side {side}: {walk:?} against {plan:?}"
-                        );
-                    }
+                    assert_lands(&walk, &plan, &format!("t {t} turn {turn} side {side}"));
                     checked += 1;
                 }
             }
@@ -953,10 +948,7 @@ mod tests {
         for i in 0..40 {
             let t = 0.6 + 0.037 * f64::from(i);
             let st = g.state(t);
-            assert_eq!(
-                g.targets_placed(&rest, &st, 0.0, [0.0; 2]),
-                g.targets(&rest, t)
-            );
+            assert_eq!(g.targets_of(&rest, &st, 0.0, [0.0; 2]), g.targets(&rest, t));
             for pitch in [0.05, 0.12, 0.25] {
                 for placed in 0..2 {
                     let mut by = [0.0; 2];
@@ -971,12 +963,7 @@ mod tests {
                     else {
                         continue;
                     };
-                    for k in 0..3 {
-                        assert!(
-                            (walk[k] - plan[k]).abs() < 1e-6,
-                            "t {t} pitch {pitch} side {placed}: {walk:?} against {plan:?}"
-                        );
-                    }
+                    assert_lands(&walk, &plan, &format!("t {t} pitch {pitch} side {placed}"));
                     // Pitched forward, the foot's target moves ahead of the plan's.
                     let at = tilt.inverse() * walk;
                     assert!(at[0] > plan[0], "t {t} pitch {pitch}: {at:?}");
