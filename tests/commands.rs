@@ -672,6 +672,18 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
     assert!(capped > 0.02 && capped < 0.15, "{capped}");
     let text = String::from_utf8(long("step_reach=1", false)).unwrap();
     assert!(text.contains("capped by step_reach"), "{text}");
+    assert!(!text.contains("beyond the legs' reach"), "{text}");
+    // Without the cap the same plan is said to be beyond the legs' reach,
+    // the step the cap would plan, in the text and the JSON.
+    let uncapped = String::from_utf8(long("step_reach=0", false)).unwrap();
+    assert!(
+        uncapped.contains(&format!("beyond the legs' reach ({capped:.4} m in a step")),
+        "{uncapped}"
+    );
+    let v: serde_json::Value = serde_json::from_slice(&long("step_reach=0", true)).unwrap();
+    assert_eq!(v["reach_step_m"].as_f64(), Some(capped), "{v}");
+    // The expert's step is within its reach, and not said to be beyond it.
+    assert!(a["reach_step_m"].as_f64().is_some_and(|r| r > 0.08), "{a}");
     // The closed loop's touchdowns: the step each took and how far the
     // foot landed before moved on, in the text and the JSON.
     assert!(text.contains("at touchdown the feet are"), "{text}");

@@ -158,6 +158,8 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         .map_err(|e| Failure::Job(e.into()))?;
     let step =
         trial::planned_step_m(robot_type, &values, engine).map_err(|e| Failure::Job(e.into()))?;
+    let reach =
+        trial::reach_step_m(robot_type, &values, engine).map_err(|e| Failure::Job(e.into()))?;
     // Over the trials that did not fall, the ones mx averages.
     let split = Footwork::mean(
         runs.iter()
@@ -179,6 +181,7 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             "ey": s.ey,
             "planned_m": planned,
             "planned_step_m": step,
+            "reach_step_m": reach,
             "footwork": split,
             "trials": runs.iter().map(trial_json).collect::<Vec<_>>(),
             "diverged": diverged,
@@ -217,6 +220,13 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             );
         } else {
             outln!("the walk's plan: {planned:.3} m, in steps of {step:.4} m");
+        }
+        if step > reach && engine.gait.with_params(&values).step_reach == 0.0 {
+            outln!(
+                "the plan's step is beyond the legs' reach ({reach:.4} m in a step at the \
+                 hip pitch's speed cap): such a walk may fall short of its plan, and far \
+                 beyond the reach go backward; `--param step_reach=1` caps the step there"
+            );
         }
         if let Some(w) = &split {
             outln!(
@@ -272,8 +282,9 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             );
         }
         outln!(
-            "{:.1} trials/s on {threads} threads ({wall:.2} s wall)",
-            a.trials as f64 / wall
+            "{:.1} trials/s on {threads} thread{} ({wall:.2} s wall)",
+            a.trials as f64 / wall,
+            if threads == 1 { "" } else { "s" }
         );
     }
     Ok(())

@@ -343,6 +343,28 @@ pub fn planned_step_m(
     Ok(gait.step_length())
 }
 
+/// The longest step the legs swing in time under the hip pitch's speed cap,
+/// m: the step `step_reach = 1` would plan for an unbounded ask, whatever
+/// this set's own `step_reach` ([`super::walk::reachable_step`]). A plan
+/// beyond it is walked short, or backward (docs/walk.md, "The lean file's
+/// landscape").
+pub fn reach_step_m(
+    robot_type: u8,
+    params: &ParamValues,
+    engine: Engine,
+) -> Result<f64, NaoTrialError> {
+    let model = NaoModel::with_params(robot_type, params)?;
+    let cfg = GaitConfig {
+        step_reach: 1.0,
+        ..engine.gait.with_params(params)
+    };
+    let p = WalkParams {
+        step_length: f64::INFINITY,
+        ..params.walk()
+    };
+    Ok(Gait::with_config(&model, p, 0.0, cfg).step_length())
+}
+
 /// The physics a walk of these constants runs on: `settings`, with the arms
 /// free of the torso where the walk swings them (they must move; the head
 /// stays welded, as in every other trial).
