@@ -346,8 +346,8 @@ pub fn planned_step_m(
 /// The longest step the legs swing in time under the hip pitch's speed cap,
 /// m: the step `step_reach = 1` would plan for an unbounded ask, whatever
 /// this set's own `step_reach` ([`super::walk::reachable_step`]). A plan
-/// beyond it is walked short, or backward (docs/walk.md, "The lean file's
-/// landscape").
+/// beyond it may be walked short of itself, and one far beyond it backward
+/// (docs/walk.md, "The lean file's landscape").
 pub fn reach_step_m(
     robot_type: u8,
     params: &ParamValues,
