@@ -312,6 +312,20 @@ pub enum NaoTrialError {
     Panicked(String),
 }
 
+/// The walk's plan of `walk` over `duration_s` with the constants `cfg`, on
+/// the body `params` builds: what [`planned_travel_m`], [`planned_step_m`]
+/// and [`reach_step_m`] read.
+fn plan(
+    robot_type: u8,
+    params: &ParamValues,
+    walk: WalkParams,
+    duration_s: f64,
+    cfg: GaitConfig,
+) -> Result<Gait, NaoTrialError> {
+    let model = NaoModel::with_params(robot_type, params)?;
+    Ok(Gait::with_config(&model, walk, duration_s, cfg))
+}
+
 /// How far the walk's plan carries the hip forward over a trial of
 /// `duration_s`, m: what a trial walks if it walks as planned (no sliding
 /// or lunging passed off as walking).
@@ -321,13 +335,8 @@ pub fn planned_travel_m(
     duration_s: f64,
     engine: Engine,
 ) -> Result<f64, NaoTrialError> {
-    let model = NaoModel::with_params(robot_type, params)?;
-    let gait = Gait::with_config(
-        &model,
-        params.walk(),
-        duration_s,
-        engine.gait.with_params(params),
-    );
+    let cfg = engine.gait.with_params(params);
+    let gait = plan(robot_type, params, params.walk(), duration_s, cfg)?;
     Ok(gait.state(duration_s).hip[0] - gait.state(0.0).hip[0])
 }
 
@@ -338,9 +347,8 @@ pub fn planned_step_m(
     params: &ParamValues,
     engine: Engine,
 ) -> Result<f64, NaoTrialError> {
-    let model = NaoModel::with_params(robot_type, params)?;
-    let gait = Gait::with_config(&model, params.walk(), 0.0, engine.gait.with_params(params));
-    Ok(gait.step_length())
+    let cfg = engine.gait.with_params(params);
+    Ok(plan(robot_type, params, params.walk(), 0.0, cfg)?.step_length())
 }
 
 /// The longest step the legs swing in time under the hip pitch's speed cap,
@@ -353,16 +361,15 @@ pub fn reach_step_m(
     params: &ParamValues,
     engine: Engine,
 ) -> Result<f64, NaoTrialError> {
-    let model = NaoModel::with_params(robot_type, params)?;
     let cfg = GaitConfig {
         step_reach: 1.0,
         ..engine.gait.with_params(params)
     };
-    let p = WalkParams {
+    let unbounded = WalkParams {
         step_length: f64::INFINITY,
         ..params.walk()
     };
-    Ok(Gait::with_config(&model, p, 0.0, cfg).step_length())
+    Ok(plan(robot_type, params, unbounded, 0.0, cfg)?.step_length())
 }
 
 /// The physics a walk of these constants runs on: `settings`, with the arms
