@@ -484,6 +484,11 @@ pub struct TrialArgs {
     /// 1–20 (`[physics] firm_stop_window_deg`; default 3, or the experiment's).
     #[arg(long)]
     pub firm_stop_window_deg: Option<f64>,
+    /// With firm stops, a joint also gets its limit row when its speed would
+    /// carry it into the window within this many physics steps, 0–10
+    /// (`[physics] firm_stop_lookahead`; default 0, or the experiment's).
+    #[arg(long)]
+    pub firm_stop_lookahead: Option<u32>,
     /// Record the first trial (seed --seed; with --run, the farm trial):
     /// every body's pose each 20 ms cycle, as JSON lines, for a replay.
     #[arg(long, value_name = "FILE")]
@@ -501,7 +506,7 @@ pub struct TrialArgs {
         requires_all = ["iteration", "trial"],
         conflicts_with_all = ["params", "trials", "seed", "robot_type", "duration", "substeps",
             "solver_iterations", "pgs_iterations", "armature", "contact_hz", "firm_stops",
-            "firm_stop_window_deg", "substeps_max"]
+            "firm_stop_window_deg", "firm_stop_lookahead", "substeps_max"]
     )]
     pub run_dir: Option<std::path::PathBuf>,
     /// With --run: the iteration.

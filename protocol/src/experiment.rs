@@ -276,6 +276,15 @@ pub struct Physics {
     /// than this per physics step passes it before its row is in place: the
     /// arms file's faster walk needs 8 (`docs/walk.md`, "The stop window").
     pub firm_stop_window_deg: f64,
+    /// With `firm_stops`, a joint also gets its speculative limit row when
+    /// its speed would carry it into the window within this many physics
+    /// steps (0..=10; 0, the default: the window alone). A light link flung
+    /// by a staggering walk crosses the whole window in one step and passes
+    /// its stop before its row is in place: the capped lean file's corner
+    /// `10011` so flings an elbow yaw 7.23° past its stop, and 1 step of
+    /// look-ahead keeps it within 0.01° (`docs/walk.md`, "A stop row ahead
+    /// of a flung joint").
+    pub firm_stop_lookahead: u32,
     /// With it (`substeps`..=50), each trial draws its physics steps per
     /// cycle uniformly from `substeps..=substeps_max` by its seed, so that
     /// CLOP maximises the mean over a band of steps and cannot fit an
@@ -312,6 +321,11 @@ impl std::fmt::Display for Physics {
             if self.firm_stop_window_deg != Self::default().firm_stop_window_deg {
                 write!(f, " within {} deg", self.firm_stop_window_deg)?;
             }
+            match self.firm_stop_lookahead {
+                0 => {}
+                1 => write!(f, " or 1 step ahead")?,
+                k => write!(f, " or {k} steps ahead")?,
+            }
         }
         Ok(())
     }
@@ -327,6 +341,7 @@ impl Default for Physics {
             contact_hz: 500.0,
             firm_stops: false,
             firm_stop_window_deg: 3.0,
+            firm_stop_lookahead: 0,
             substeps_max: 0,
         }
     }
@@ -378,6 +393,10 @@ impl Physics {
         let c = self.contact_hz;
         if !(c.is_finite() && (10.0..=10_000.0).contains(&c)) {
             return Err(("contact_hz", format!("{} is not in [10, 10000]", Shown(c))));
+        }
+        let k = self.firm_stop_lookahead;
+        if k > 10 {
+            return Err(("firm_stop_lookahead", format!("{k} is not in 0..=10")));
         }
         let w = self.firm_stop_window_deg;
         if !(w.is_finite() && (1.0..=20.0).contains(&w)) {
@@ -801,6 +820,16 @@ expert = -0.04
                 "iterations = 5",
                 "iterations = 5\n[physics]\nfirm_stop_window_deg = nan",
                 "physics.firm_stop_window_deg",
+            ),
+            (
+                "iterations = 5",
+                "iterations = 5\n[physics]\nfirm_stop_lookahead = 11",
+                "physics.firm_stop_lookahead",
+            ),
+            (
+                "iterations = 5",
+                "iterations = 5\n[physics]\nfirm_stop_lookahead = -1",
+                "firm_stop_lookahead",
             ),
             (
                 "iterations = 5",

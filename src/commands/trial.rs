@@ -85,6 +85,7 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         contact_hz: a.contact_hz.unwrap_or(d.contact_hz),
         firm_stops: a.firm_stops.unwrap_or(d.firm_stops),
         firm_stop_window_deg: a.firm_stop_window_deg.unwrap_or(d.firm_stop_window_deg),
+        firm_stop_lookahead: a.firm_stop_lookahead.unwrap_or(d.firm_stop_lookahead),
         // --substeps alone asks for that step, not the file's band.
         substeps_max: a.substeps_max.unwrap_or(if a.substeps.is_some() {
             0

@@ -138,6 +138,10 @@ pub struct SimSettings {
     /// joint's row in place a step ahead; "The stop window": the arms file
     /// needs 8°).
     pub firm_stop_window_deg: f64,
+    /// With firm stops, a hinge also gets its row when its speed would carry
+    /// it into the window within this many physics steps (0: the window
+    /// alone; `protocol::Physics::firm_stop_lookahead`).
+    pub firm_stop_lookahead: u32,
     /// Every joint's speed cap times this (1: the league's robot): kept to
     /// measure which limit stops a walk (`naofarm trial --limit`), not for trials.
     pub speed_cap_scale: f64,
@@ -180,6 +184,7 @@ impl Default for SimSettings {
             every_limit_row: false,
             firm_stops: physics.firm_stops,
             firm_stop_window_deg: physics.firm_stop_window_deg,
+            firm_stop_lookahead: physics.firm_stop_lookahead,
             speed_cap_scale: 1.0,
             speed_cap_joints: 0,
             max_torque_nm: MAX_TORQUE_NM,
@@ -218,6 +223,7 @@ impl SimSettings {
             contact_hz: physics.contact_hz,
             firm_stops: physics.firm_stops,
             firm_stop_window_deg: physics.firm_stop_window_deg,
+            firm_stop_lookahead: physics.firm_stop_lookahead,
             ..Self::default()
         }
     }
@@ -904,11 +910,20 @@ impl Sim {
     fn set_motors_and_stops(&mut self, commands: &[f64], damping: f32) {
         let inv_dt = self.world.integration_parameters.inv_dt();
         let every_limit_row = self.settings.every_limit_row;
+        let lookahead = self.settings.firm_stop_lookahead as f32;
         let Some((mb, _)) = self.world.multibody_joints.get_mut(self.root_joint) else {
             return;
         };
         for ((h, c), joint) in self.hinges.iter().zip(commands).zip(&self.model.joints) {
             let Some(h) = h else { continue };
+            // How far the hinge's speed carries it in `firm_stop_lookahead`
+            // steps (a stop window exists only with firm stops, and the toes').
+            let ahead = match mb.link(h.link) {
+                Some(l) if lookahead > 0.0 && h.stop_window > 0.0 => {
+                    mb.joint_velocity(l)[0] * lookahead / inv_dt
+                }
+                _ => 0.0,
+            };
             let Some(l) = mb.link_mut(h.link) else {
                 continue;
             };
@@ -917,7 +932,8 @@ impl Sim {
             let (lo, hi) = (joint.limits_rad.0 as f32, joint.limits_rad.1 as f32);
             let data = &mut l.joint.data;
             let window = h.stop_window;
-            if every_limit_row || q < lo + window || hi - window < q {
+            let (reach_lo, reach_hi) = (q + ahead.min(0.0), q + ahead.max(0.0));
+            if every_limit_row || reach_lo < lo + window || hi - window < reach_hi {
                 data.set_limits(JointAxis::AngX, [lo, hi]);
             } else {
                 data.limit_axes.remove(JointAxesMask::ANG_X);
