@@ -910,18 +910,20 @@ impl Sim {
     fn set_motors_and_stops(&mut self, commands: &[f64], damping: f32) {
         let inv_dt = self.world.integration_parameters.inv_dt();
         let every_limit_row = self.settings.every_limit_row;
-        let lookahead = self.settings.firm_stop_lookahead as f32;
+        // Only firm stops look ahead (the toes' own window does not).
+        let lookahead = if self.settings.firm_stops {
+            self.settings.firm_stop_lookahead as f32
+        } else {
+            0.0
+        };
         let Some((mb, _)) = self.world.multibody_joints.get_mut(self.root_joint) else {
             return;
         };
         for ((h, c), joint) in self.hinges.iter().zip(commands).zip(&self.model.joints) {
             let Some(h) = h else { continue };
-            // How far the hinge's speed carries it in `firm_stop_lookahead`
-            // steps (a stop window exists only with firm stops, and the toes').
+            // How far the hinge's speed carries it in `firm_stop_lookahead` steps.
             let ahead = match mb.link(h.link) {
-                Some(l) if lookahead > 0.0 && h.stop_window > 0.0 => {
-                    mb.joint_velocity(l)[0] * lookahead / inv_dt
-                }
+                Some(l) if lookahead > 0.0 => mb.joint_velocity(l)[0] * lookahead / inv_dt,
                 _ => 0.0,
             };
             let Some(l) = mb.link_mut(h.link) else {
