@@ -471,8 +471,12 @@ const FILES: [FileWalk; 9] = [
         label: "roll file: the arms 5 ms, hip roll 0.09",
     },
     // The roll file with its steps aimed and its feet placed against a
-    // forward lean: the file README recommends, whose experiment 2 keeps
-    // every bound of the pace issue but the speed at every seed measured.
+    // forward lean, whose experiment 2 keeps every bound of the pace issue
+    // but the speed at every seed measured. Its expert walk is, to the bit,
+    // that of the file README recommends (`…-lean-reach.toml`: the steps
+    // capped at the legs' reach, which the expert's are within, and a stop
+    // row a step ahead, which none of its trials needs), so this row
+    // measures both.
     FileWalk {
         text: include_str!("../../experiments/physical-technical-arms-5ms-roll-aim-lean.toml"),
         key: "arms_5ms_roll_aim_lean",
