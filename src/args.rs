@@ -442,7 +442,8 @@ pub struct TrialArgs {
     /// the joints the scale applies to), `max_torque_nm`, `contact_hz`,
     /// `contact_prediction_m`, `friction_scale`: the trial's drawn ground
     /// friction times this, `weld_arm_rest=1`: swinging arms move at the
-    /// shoulder pitches only, `friction_in_bias_pass=1`: rapier solves
+    /// shoulder pitches only, `weld_elbow_yaws=1`: the elbow yaws welded at
+    /// 0°, `friction_in_bias_pass=1`: rapier solves
     /// friction in each step's biased pass too): to measure which limit stops a walk
     /// (docs/walk.md); farm trials always use the league's.
     #[arg(long, value_name = "KEY=VALUE", hide = true)]

@@ -113,6 +113,11 @@ pub struct SimSettings {
     /// carrying its whole arm as one body (20 degrees of freedom instead
     /// of 26).
     pub weld_arm_rest: bool,
+    /// With `weld_head`, weld the elbow yaws (`lae3`, `rae3`), which the
+    /// walk holds at 0°: kept to measure what their light links' swings at
+    /// 5 ms steps do to a walk (`naofarm trial --limit weld_elbow_yaws=1`;
+    /// docs/walk.md, "A stop row ahead of a flung joint"), not for trials.
+    pub weld_elbow_yaws: bool,
     /// Motor damping (velocity constraint stiffness), N·m·s/rad.
     pub motor_damping: f64,
     /// Passive damping in every hinge, N·m·s/rad (multibody joints only).
@@ -177,6 +182,7 @@ impl Default for SimSettings {
             weld_upper_body: true,
             weld_head: false,
             weld_arm_rest: false,
+            weld_elbow_yaws: false,
             motor_damping: 1000.0,
             joint_damping: 0.0,
             armature_kg_m2: physics.armature_kg_m2,
@@ -208,7 +214,9 @@ impl SimSettings {
         is_upper_body_joint(name)
             && (self.weld_upper_body
                 || self.weld_head
-                    && (!is_arm_joint(name) || self.weld_arm_rest && !is_shoulder_pitch(name)))
+                    && (!is_arm_joint(name)
+                        || self.weld_arm_rest && !is_shoulder_pitch(name)
+                        || self.weld_elbow_yaws && name.ends_with("ae3")))
     }
 
     /// The defaults with an experiment's `[physics]` counts.
