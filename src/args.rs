@@ -442,8 +442,7 @@ pub struct TrialArgs {
     /// the joints the scale applies to), `max_torque_nm`, `contact_hz`,
     /// `contact_prediction_m`, `friction_scale`: the trial's drawn ground
     /// friction times this, `weld_arm_rest=1`: swinging arms move at the
-    /// shoulder pitches only, `weld_elbow_yaws=1`: the elbow yaws welded at
-    /// 0°, `friction_in_bias_pass=1`: rapier solves
+    /// shoulder pitches only, `friction_in_bias_pass=1`: rapier solves
     /// friction in each step's biased pass too): to measure which limit stops a walk
     /// (docs/walk.md); farm trials always use the league's.
     #[arg(long, value_name = "KEY=VALUE", hide = true)]
@@ -490,6 +489,10 @@ pub struct TrialArgs {
     /// (`[physics] firm_stop_lookahead`; default 0, or the experiment's).
     #[arg(long)]
     pub firm_stop_lookahead: Option<u32>,
+    /// Weld the elbow yaws at 0° (`[physics] weld_elbow_yaws`; `true` or
+    /// `false`, default false, or the experiment's).
+    #[arg(long)]
+    pub weld_elbow_yaws: Option<bool>,
     /// Record the first trial (seed --seed; with --run, the farm trial):
     /// every body's pose each 20 ms cycle, as JSON lines, for a replay.
     #[arg(long, value_name = "FILE")]
@@ -507,7 +510,7 @@ pub struct TrialArgs {
         requires_all = ["iteration", "trial"],
         conflicts_with_all = ["params", "trials", "seed", "robot_type", "duration", "substeps",
             "solver_iterations", "pgs_iterations", "armature", "contact_hz", "firm_stops",
-            "firm_stop_window_deg", "firm_stop_lookahead", "substeps_max"]
+            "firm_stop_window_deg", "firm_stop_lookahead", "weld_elbow_yaws", "substeps_max"]
     )]
     pub run_dir: Option<std::path::PathBuf>,
     /// With --run: the iteration.

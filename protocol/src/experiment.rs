@@ -285,6 +285,12 @@ pub struct Physics {
     /// look-ahead keeps it within 0.01° (`docs/walk.md`, "A stop row ahead
     /// of a flung joint").
     pub firm_stop_lookahead: u32,
+    /// Weld the elbow yaws (`lae3`, `rae3`) at 0°, where the walk holds
+    /// them (default false). With the arms swinging, at 5 ms steps those
+    /// light links swing out against their servos, as they do not at 1 ms,
+    /// and the fast walks lean on it (`docs/walk.md`, "What the look-ahead
+    /// does not mend"); welded, a walk cannot.
+    pub weld_elbow_yaws: bool,
     /// With it (`substeps`..=50), each trial draws its physics steps per
     /// cycle uniformly from `substeps..=substeps_max` by its seed, so that
     /// CLOP maximises the mean over a band of steps and cannot fit an
@@ -316,6 +322,9 @@ impl std::fmt::Display for Physics {
                 self.substeps, self.substeps_max
             )?;
         }
+        if self.weld_elbow_yaws {
+            write!(f, ", elbow yaws welded")?;
+        }
         if self.firm_stops {
             write!(f, ", firm stops")?;
             if self.firm_stop_window_deg != Self::default().firm_stop_window_deg {
@@ -342,6 +351,7 @@ impl Default for Physics {
             firm_stops: false,
             firm_stop_window_deg: 3.0,
             firm_stop_lookahead: 0,
+            weld_elbow_yaws: false,
             substeps_max: 0,
         }
     }
@@ -830,6 +840,11 @@ expert = -0.04
                 "iterations = 5",
                 "iterations = 5\n[physics]\nfirm_stop_lookahead = -1",
                 "firm_stop_lookahead",
+            ),
+            (
+                "iterations = 5",
+                "iterations = 5\n[physics]\nweld_elbow_yaws = 1",
+                "weld_elbow_yaws",
             ),
             (
                 "iterations = 5",

@@ -27,8 +27,9 @@ use crate::{
 /// `turn_place` joined the registry; 11 since a trial request's physics
 /// carries `substeps_max`; 12 since `step_reach` joined the registry; 13
 /// since `step_aim` joined it; 14 since `lean_place` joined it; 15 since a
-/// trial request's physics carries `firm_stop_lookahead`.
-pub const WIRE_VERSION: u8 = 15;
+/// trial request's physics carries `firm_stop_lookahead`; 16 since it
+/// carries `weld_elbow_yaws`.
+pub const WIRE_VERSION: u8 = 16;
 /// Largest message accepted, in bytes (checked before any allocation).
 pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
 const MAGIC: [u8; 2] = *b"NF";
@@ -837,10 +838,10 @@ mod tests {
         fn trial_request_round_trips(run in run(), i in any::<u64>(), k in any::<u32>(), seed in any::<u64>(),
                                      d in 0.1f64..100.0, ps in params(), t in 0u8..5, disp in any::<u64>(),
                                      sub in 1u32..=50, its in 1u32..=16, pgs in 1u32..=200, arm in 0.0f64..0.1, hz in 10.0f64..10_000.0, firm in any::<bool>(),
-                                     window in 1.0f64..20.0, ahead in 0u32..=10, band in 0u32..=50, closed in any::<bool>()) {
+                                     window in 1.0f64..20.0, ahead in 0u32..=10, elbows in any::<bool>(), band in 0u32..=50, closed in any::<bool>()) {
             // A band below the fixed count is refused (tested below): 0 then.
             let band = if band < sub { 0 } else { band };
-            let physics = Physics { substeps: sub, solver_iterations: its, pgs_iterations: pgs, armature_kg_m2: arm, contact_hz: hz, firm_stops: firm, firm_stop_window_deg: window, firm_stop_lookahead: ahead, substeps_max: band };
+            let physics = Physics { substeps: sub, solver_iterations: its, pgs_iterations: pgs, armature_kg_m2: arm, contact_hz: hz, firm_stops: firm, firm_stop_window_deg: window, firm_stop_lookahead: ahead, weld_elbow_yaws: elbows, substeps_max: band };
             let m = TrialRequest { run, iteration: i, trial: k, seed, model: TrialModel::Synthetic,
                                    robot_type: t, duration_s: d, params: ps, dispatch: disp, physics,
                                    walk: if closed { WalkEngine::ClosedLoop } else { WalkEngine::OpenLoop } };

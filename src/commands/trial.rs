@@ -86,6 +86,7 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         firm_stops: a.firm_stops.unwrap_or(d.firm_stops),
         firm_stop_window_deg: a.firm_stop_window_deg.unwrap_or(d.firm_stop_window_deg),
         firm_stop_lookahead: a.firm_stop_lookahead.unwrap_or(d.firm_stop_lookahead),
+        weld_elbow_yaws: a.weld_elbow_yaws.unwrap_or(d.weld_elbow_yaws),
         // --substeps alone asks for that step, not the file's band.
         substeps_max: a.substeps_max.unwrap_or(if a.substeps.is_some() {
             0
@@ -628,13 +629,12 @@ fn move_limit(settings: &mut SimSettings, model: &NaoModel, kv: &str) -> Result<
         "contact_prediction_m" => settings.contact_prediction_m = v.min(0.1),
         "friction_scale" => settings.friction_scale = v.min(100.0),
         "weld_arm_rest" if v == 1.0 => settings.weld_arm_rest = true,
-        "weld_elbow_yaws" if v == 1.0 => settings.weld_elbow_yaws = true,
         "friction_in_bias_pass" if v == 1.0 => settings.friction_in_bias_pass = true,
         _ => {
             return Err(Failure::Usage(anyhow!(
                 "--limit: unknown limit `{kv}` (speed_cap_scale, speed_cap_joints, \
                  max_torque_nm, contact_hz, contact_prediction_m, friction_scale, \
-                 weld_arm_rest=1, weld_elbow_yaws=1, friction_in_bias_pass=1)"
+                 weld_arm_rest=1, friction_in_bias_pass=1)"
             )))
         }
     }

@@ -114,9 +114,7 @@ pub struct SimSettings {
     /// of 26).
     pub weld_arm_rest: bool,
     /// With `weld_head`, weld the elbow yaws (`lae3`, `rae3`), which the
-    /// walk holds at 0°: kept to measure what their light links' swings at
-    /// 5 ms steps do to a walk (`naofarm trial --limit weld_elbow_yaws=1`;
-    /// docs/walk.md, "A stop row ahead of a flung joint"), not for trials.
+    /// walk holds at 0° (`protocol::Physics::weld_elbow_yaws`).
     pub weld_elbow_yaws: bool,
     /// Motor damping (velocity constraint stiffness), N·m·s/rad.
     pub motor_damping: f64,
@@ -182,7 +180,7 @@ impl Default for SimSettings {
             weld_upper_body: true,
             weld_head: false,
             weld_arm_rest: false,
-            weld_elbow_yaws: false,
+            weld_elbow_yaws: physics.weld_elbow_yaws,
             motor_damping: 1000.0,
             joint_damping: 0.0,
             armature_kg_m2: physics.armature_kg_m2,
@@ -232,6 +230,7 @@ impl SimSettings {
             firm_stops: physics.firm_stops,
             firm_stop_window_deg: physics.firm_stop_window_deg,
             firm_stop_lookahead: physics.firm_stop_lookahead,
+            weld_elbow_yaws: physics.weld_elbow_yaws,
             ..Self::default()
         }
     }
