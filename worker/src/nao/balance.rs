@@ -1292,6 +1292,16 @@ mod tests {
         assert!((mx / planned - 1.0).abs() <= 0.1, "{mx} of {planned}");
     }
 
+    /// Seed 3's Optim.1 of experiment 2 on the capped lean file (session
+    /// 55's run; `docs/results/exp2-arms-5ms-roll-aim-lean-reach-seed3/`).
+    const CAPPED_SEED3_OPTIM1: [(&str, f64); 5] = [
+        ("ThighRelHip2_Z", -0.07612060971177904),
+        ("ratio_flexion", 0.8442214276072637),
+        ("long_offset_MidAnkles_2_Torso_Init", 0.0064570387050410655),
+        ("height_lift", 0.02511712484569534),
+        ("xlength_step_max", 0.123665826694503),
+    ];
+
     /// A stop row set ahead of a flung joint (`[physics]
     /// firm_stop_lookahead`; `experiments/physical-technical-arms-5ms-roll-aim-lean-reach.toml`):
     /// L's corner `10011` (the shortest thigh, the deepest crouch, the
@@ -1361,18 +1371,7 @@ mod tests {
         let (exp, physics, expert) = shipped(include_str!(
             "../../../experiments/physical-technical-arms-5ms-roll-aim-lean-reach.toml"
         ));
-        keeps_the_stops_and_walks_six_metres(
-            &exp,
-            physics,
-            &expert,
-            &[
-                ("ThighRelHip2_Z", -0.07612060971177904),
-                ("ratio_flexion", 0.8442214276072637),
-                ("long_offset_MidAnkles_2_Torso_Init", 0.0064570387050410655),
-                ("height_lift", 0.02511712484569534),
-                ("xlength_step_max", 0.123665826694503),
-            ],
-        );
+        keeps_the_stops_and_walks_six_metres(&exp, physics, &expert, &CAPPED_SEED3_OPTIM1);
     }
 
     /// The capped lean file's fast walk leans on its elbow yaws' swing
@@ -1405,16 +1404,7 @@ mod tests {
         for name in ["lae1", "lae2", "rae4"] {
             assert!(!swinging(welded).welds(name), "{name}");
         }
-        let optim1 = found_in(
-            &exp,
-            &[
-                ("ThighRelHip2_Z", -0.07612060971177904),
-                ("ratio_flexion", 0.8442214276072637),
-                ("long_offset_MidAnkles_2_Torso_Init", 0.0064570387050410655),
-                ("height_lift", 0.02511712484569534),
-                ("xlength_step_max", 0.123665826694503),
-            ],
-        );
+        let optim1 = found_in(&exp, &CAPPED_SEED3_OPTIM1);
         let batch = Batch {
             seed0: 777,
             n: 30,

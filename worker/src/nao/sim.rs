@@ -929,9 +929,11 @@ impl Sim {
         for ((h, c), joint) in self.hinges.iter().zip(commands).zip(&self.model.joints) {
             let Some(h) = h else { continue };
             // How far the hinge's speed carries it in `firm_stop_lookahead` steps.
-            let ahead = match mb.link(h.link) {
-                Some(l) if lookahead > 0.0 => mb.joint_velocity(l)[0] * lookahead / inv_dt,
-                _ => 0.0,
+            let ahead = if lookahead > 0.0 {
+                mb.link(h.link)
+                    .map_or(0.0, |l| mb.joint_velocity(l)[0] * lookahead / inv_dt)
+            } else {
+                0.0
             };
             let Some(l) = mb.link_mut(h.link) else {
                 continue;
