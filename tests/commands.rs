@@ -703,6 +703,7 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
         "height_lift=nan",
         "step_reach=-1",
         "step_aim=2",
+        "hip_roll_rate_gain=6",
     ] {
         let out = naofarm()
             .args(["trial", "--trials", "1", "--param", bad])
@@ -713,7 +714,12 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
     }
     // A feedback gain on the open loop, which has no feedback: refused by
     // name rather than ignored.
-    for gain in ["hip_pitch_gain", "step_aim", "lean_place"] {
+    for gain in [
+        "hip_pitch_gain",
+        "step_aim",
+        "lean_place",
+        "hip_roll_rate_gain",
+    ] {
         let err = fails(
             naofarm().args(["trial", "--trials", "1", "--param", &format!("{gain}=0.3")]),
             2,
@@ -1076,6 +1082,7 @@ fn bench_sim_reports_its_shares_over_rounds() {
         "arms_5ms",
         "arms_5ms_roll",
         "arms_5ms_roll_aim_lean",
+        "arms_5ms_damp",
         "arms",
         "firm",
         "band",

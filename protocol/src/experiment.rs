@@ -119,7 +119,7 @@ pub enum WalkEngine {
 }
 
 /// A feedback gain (`hip_pitch_gain`, `ankle_pitch_gain`, `turn_place`, `step_aim`,
-/// `lean_place`) needs a walk with
+/// `lean_place`, `hip_roll_rate_gain`) needs a walk with
 /// feedback: the open loop has none to give it to, so a parameter set for it
 /// that names one is refused (by an experiment file and by `naofarm trial`).
 pub fn gain_has_feedback(walk: WalkEngine, name: &str) -> Result<(), String> {
@@ -131,6 +131,7 @@ pub fn gain_has_feedback(walk: WalkEngine, name: &str) -> Result<(), String> {
                 | params::Param::TurnPlace
                 | params::Param::StepAim
                 | params::Param::LeanPlace
+                | params::Param::HipRollRateGain
         )
     });
     if gain && walk == WalkEngine::OpenLoop {

@@ -62,6 +62,8 @@ pub enum Param {
     StepAim,
     /// `lean_place`.
     LeanPlace,
+    /// `hip_roll_rate_gain`.
+    HipRollRateGain,
 }
 
 impl Param {
@@ -310,6 +312,17 @@ pub const KNOWN: &[KnownParam] = &[
         unit: "rad/rad",
         default: 0.0,
         doc: "a foot placed against this share of the torso's sensed forward lean, in the share its load leaves it (1: a foot in the air where the plan has it in the walk's frame); a torso leaning back moves no foot; not given, the closed-loop engine's own (0: in the torso's frame)",
+    },
+    // The stance hip's roll against the torso's sensed roll rate.
+    KnownParam {
+        param: Param::HipRollRateGain,
+        name: "hip_roll_rate_gain",
+        role: Role::Walk,
+        min: -5.0,
+        max: 5.0,
+        unit: "rad/(rad/s)",
+        default: 0.0,
+        doc: "stance hip roll per rad/s of the gyro's sensed torso roll rate, weighted by the leg's share of the sensed load (a damper of the sideways rock); not given, the closed-loop engine's own (0)",
     },
 ];
 

@@ -432,7 +432,7 @@ impl FileWalk {
 }
 
 /// The files `bench sim` measures, the converged first.
-const FILES: [FileWalk; 9] = [
+const FILES: [FileWalk; 10] = [
     // Converged physics with its fixed values.
     FileWalk {
         text: include_str!("../../experiments/physical-technical-converged.toml"),
@@ -481,6 +481,16 @@ const FILES: [FileWalk; 9] = [
         text: include_str!("../../experiments/physical-technical-arms-5ms-roll-aim-lean.toml"),
         key: "arms_5ms_roll_aim_lean",
         label: "lean file: the roll's, aimed, lean placed",
+    },
+    // The recommended file with the elbow yaws welded (no walk stands on
+    // their 5 ms swing) and the stance hip's roll against the gyro's roll
+    // rate: the file whose optima walk 6 m without the artifact.
+    FileWalk {
+        text: include_str!(
+            "../../experiments/physical-technical-arms-5ms-roll-aim-lean-reach-damp.toml"
+        ),
+        key: "arms_5ms_damp",
+        label: "damp file: elbow yaws welded, roll damped",
     },
     // The step-period file with each trial's step drawn from a band.
     FileWalk {

@@ -197,7 +197,8 @@ impl Morphology {
             | Param::TurnPlace
             | Param::StepReach
             | Param::StepAim
-            | Param::LeanPlace => None,
+            | Param::LeanPlace
+            | Param::HipRollRateGain => None,
         }
     }
 
