@@ -1429,6 +1429,12 @@ mod tests {
         assert!(held <= 0.8, "welded: s {held}");
     }
 
+    /// The damp file: the capped lean file with the elbow yaws welded and
+    /// the roll-rate damper (docs/walk.md, "The sideways rock, damped").
+    const DAMP_FILE: &str = include_str!(
+        "../../../experiments/physical-technical-arms-5ms-roll-aim-lean-reach-damp.toml"
+    );
+
     /// Seed 1's Optim.1 of experiment 2 on the capped lean file with the
     /// elbow yaws welded (session 55's run;
     /// `docs/results/exp2-arms-5ms-roll-aim-lean-reach-elbows-seed1/`).
@@ -1451,9 +1457,7 @@ mod tests {
     /// trials: 0.825 and 0.975, 6.117 m.
     #[test]
     fn damping_the_sideways_rock_stands_the_welded_fast_walk() {
-        let (exp, physics, _) = shipped(include_str!(
-            "../../../experiments/physical-technical-arms-5ms-roll-aim-lean-reach-damp.toml"
-        ));
+        let (exp, physics, _) = shipped(DAMP_FILE);
         assert!(physics.weld_elbow_yaws);
         let damped = found_in(&exp, &WELDED_SEED1_OPTIM1);
         assert_eq!(damped.given(Param::HipRollRateGain), Some(0.05));
@@ -1487,9 +1491,7 @@ mod tests {
     /// 6.005 m planned, 0.07° at worst.
     #[test]
     fn the_damp_file_keeps_the_stops_and_finds_six_metres_with_the_elbow_yaws_welded() {
-        let (exp, physics, expert) = shipped(include_str!(
-            "../../../experiments/physical-technical-arms-5ms-roll-aim-lean-reach-damp.toml"
-        ));
+        let (exp, physics, expert) = shipped(DAMP_FILE);
         assert!(physics.weld_elbow_yaws);
         keeps_the_stops_and_walks_six_metres(&exp, physics, &expert, &DAMP_SEED1_OPTIM1);
     }
@@ -1499,9 +1501,7 @@ mod tests {
     /// over 40 trials from 777: 4.502 m with, 4.073 m without.
     #[test]
     fn the_damped_files_expert_walks_shorter_without_feedback() {
-        let (_, physics, expert) = shipped(include_str!(
-            "../../../experiments/physical-technical-arms-5ms-roll-aim-lean-reach-damp.toml"
-        ));
+        let (_, physics, expert) = shipped(DAMP_FILE);
         the_expert_falls_or_walks_shorter_without_feedback(&expert, physics, (777, 40));
     }
 
