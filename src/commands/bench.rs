@@ -473,7 +473,7 @@ const FILES: [FileWalk; 10] = [
     // The roll file with its steps aimed and its feet placed against a
     // forward lean, whose experiment 2 keeps every bound of the pace issue
     // but the speed at every seed measured. Its expert walk is, to the bit,
-    // that of the file README recommends (`…-lean-reach.toml`: the steps
+    // that of the capped file (`…-lean-reach.toml`: the steps
     // capped at the legs' reach, which the expert's are within, and a stop
     // row a step ahead, which none of its trials needs), so this row
     // measures both.
@@ -482,9 +482,10 @@ const FILES: [FileWalk; 10] = [
         key: "arms_5ms_roll_aim_lean",
         label: "lean file: the roll's, aimed, lean placed",
     },
-    // The recommended file with the elbow yaws welded (no walk stands on
-    // their 5 ms swing) and the stance hip's roll against the gyro's roll
-    // rate: the file whose optima walk 6 m without the artifact.
+    // The file README recommends: the capped file with the elbow yaws
+    // welded (no walk stands on their 5 ms swing) and the stance hip's roll
+    // against the gyro's roll rate, whose optima walk 6 m without the
+    // artifact.
     FileWalk {
         text: include_str!(
             "../../experiments/physical-technical-arms-5ms-roll-aim-lean-reach-damp.toml"
