@@ -21,8 +21,9 @@
 //! - **Sideways rock**: with `hip_roll_rate_gain` (0 by default) the stance
 //!   hip's roll turns against the gyro's roll rate, in the leg's share of
 //!   the load: a damper. With the elbow yaws welded, the fast arms walks
-//!   fall in a sideways rock that it damps (docs/walk.md, "The sideways
-//!   rock, damped").
+//!   rock sideways as they lean back and fall late in a trial; the damper
+//!   calms the rock and they stand (docs/walk.md, "The sideways rock,
+//!   damped").
 //! - **Foot force sensors** weigh the stance corrections: each leg's share is
 //!   its share of the sensed vertical load, so a foot in the air gets none.
 //! - **Torso turn** about the vertical, the gyro's yaw rate integrated and
@@ -1449,7 +1450,7 @@ mod tests {
     /// The stance hip's roll turned against the gyro's roll rate
     /// (`hip_roll_rate_gain`) stands the fast walk that falls without the
     /// elbow yaws' swing (docs/walk.md, "The sideways rock, damped"): on the
-    /// damped file (`experiments/physical-technical-arms-5ms-roll-aim-lean-reach-damp.toml`,
+    /// damp file (`experiments/physical-technical-arms-5ms-roll-aim-lean-reach-damp.toml`,
     /// the elbow yaws welded) the welded run's seed-1 optimum falls in more
     /// than a tenth of its trials with the gain at 0 and in at most one of
     /// twenty with the file's 0.05, and walks 6 m. Measured over 100 trials
@@ -1496,11 +1497,11 @@ mod tests {
         keeps_the_stops_and_walks_six_metres(&exp, physics, &expert, &DAMP_SEED1_OPTIM1);
     }
 
-    /// The damped file's expert leans on its feedback: without it (every
+    /// The damp file's expert leans on its feedback: without it (every
     /// gain, the roll-rate damper too) it walks clearly shorter. Measured
     /// over 40 trials from 777: 4.502 m with, 4.073 m without.
     #[test]
-    fn the_damped_files_expert_walks_shorter_without_feedback() {
+    fn the_damp_files_expert_walks_shorter_without_feedback() {
         let (_, physics, expert) = shipped(DAMP_FILE);
         the_expert_falls_or_walks_shorter_without_feedback(&expert, physics, (777, 40));
     }
