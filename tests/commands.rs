@@ -704,6 +704,7 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
         "step_reach=-1",
         "step_aim=2",
         "hip_roll_rate_gain=6",
+        "step_aim_heading=2",
     ] {
         let out = naofarm()
             .args(["trial", "--trials", "1", "--param", bad])
@@ -719,6 +720,7 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
         "step_aim",
         "lean_place",
         "hip_roll_rate_gain",
+        "step_aim_heading",
     ] {
         let err = fails(
             naofarm().args(["trial", "--trials", "1", "--param", &format!("{gain}=0.3")]),

@@ -64,6 +64,8 @@ pub enum Param {
     LeanPlace,
     /// `hip_roll_rate_gain`.
     HipRollRateGain,
+    /// `step_aim_heading`.
+    StepAimHeading,
 }
 
 impl Param {
@@ -323,6 +325,17 @@ pub const KNOWN: &[KnownParam] = &[
         unit: "rad/(rad/s)",
         default: 0.0,
         doc: "stance hip roll per rad/s of the gyro's sensed torso roll rate, weighted by the leg's share of the sensed load (a damper of the sideways rock); not given, the closed-loop engine's own (0)",
+    },
+    // Which way step_aim reads a step.
+    KnownParam {
+        param: Param::StepAimHeading,
+        name: "step_aim_heading",
+        role: Role::Walk,
+        min: 0.0,
+        max: 1.0,
+        unit: "1",
+        default: 0.0,
+        doc: "the share of the torso's sensed turn (the gyro's yaw rate integrated) by which step_aim's reading of the feet spacing is turned back towards the walk's heading (1: along the heading; a torso that yaws with each step sees its feet's sideways offset as spacing); not given, the closed-loop engine's own (0: along the torso's x axis)",
     },
 ];
 

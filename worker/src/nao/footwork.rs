@@ -252,6 +252,26 @@ pub fn ahead(model: &NaoModel, feet: [usize; 2], side: usize, q: &[f64]) -> f64 
     x(feet[side]) - x(feet[1 - side])
 }
 
+/// How far foot `side`'s centre is ahead of the other's along the torso's x
+/// axis turned back by `turn` rad about the torso's z axis, with joint angles
+/// `q` (m): with the torso's sensed turn, the spacing along the walk's
+/// heading. At `turn` 0 it is [`ahead`], bit for bit.
+#[must_use]
+pub fn ahead_turned(model: &NaoModel, feet: [usize; 2], side: usize, q: &[f64], turn: f64) -> f64 {
+    if turn == 0.0 {
+        return ahead(model, feet, side, q);
+    }
+    if q.len() != model.joints.len() {
+        return f64::NAN;
+    }
+    let g = kinematics::body_motions(model, q, &Iso::identity());
+    let at = |i: usize| kinematics::moved(&g[i], model.bodies[i].centre);
+    let (a, b) = (at(feet[side]), at(feet[1 - side]));
+    // The torso's axes turned by `turn` in the walk's frame: x_walk =
+    // x cos(turn) − y sin(turn).
+    (a[0] - b[0]) * libm::cos(turn) - (a[1] - b[1]) * libm::sin(turn)
+}
+
 fn planted(p: &Perception, side: usize) -> bool {
     p.foot_force_n[side][2] >= PLANTED_N
 }

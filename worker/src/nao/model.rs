@@ -198,7 +198,8 @@ impl Morphology {
             | Param::StepReach
             | Param::StepAim
             | Param::LeanPlace
-            | Param::HipRollRateGain => None,
+            | Param::HipRollRateGain
+            | Param::StepAimHeading => None,
         }
     }
 

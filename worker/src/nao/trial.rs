@@ -16,7 +16,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::balance::{Balance, Gains, StepGauge};
-use super::footwork::{ahead, Footwork, Tracker};
+use super::footwork::{ahead_turned, Footwork, Tracker};
 use super::model::{ModelError, NaoModel};
 use super::sim::{fallen, standing_angles, Perception, Sim, SimError, SimSettings, Start, CYCLE_S};
 use super::walk::{Gait, GaitConfig, Paced, WalkParams};
@@ -523,7 +523,12 @@ pub fn run_observed(
             // standing, are not read.
             let swung = |a: &Option<(usize, f64)>| a.filter(|(k, _)| *k >= 2 && 1 - k % 2 == side);
             if let Some((_, aimed)) = swung(&aim_now).or(swung(&pacing.last_aim)) {
-                let landed = ahead(&model, sim.foot_bodies(), side, &sensed_q);
+                // Along the walk's heading: the torso's sensed turn, its
+                // `step_aim_heading` share, turned back (0: the torso's x axis).
+                let turn = balance
+                    .as_ref()
+                    .map_or(0.0, |b| pacing.gauge.turn_back(b.turn()));
+                let landed = ahead_turned(&model, sim.foot_bodies(), side, &sensed_q, turn);
                 pacing.gauge.fold(landed, aimed);
             }
         }
