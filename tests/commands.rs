@@ -1084,7 +1084,7 @@ fn bench_sim_reports_its_shares_over_rounds() {
         "arms_5ms",
         "arms_5ms_roll",
         "arms_5ms_roll_aim_lean",
-        "arms_5ms_damp",
+        "arms_5ms_heading",
         "arms",
         "firm",
         "band",

@@ -483,15 +483,16 @@ const FILES: [FileWalk; 10] = [
         label: "lean file: the roll's, aimed, lean placed",
     },
     // The file README recommends: the capped file with the elbow yaws
-    // welded (no walk stands on their 5 ms swing) and the stance hip's roll
-    // against the gyro's roll rate, whose optima walk 6 m without the
-    // artifact.
+    // welded (no walk stands on their 5 ms swing), the stance hip's roll
+    // against the gyro's roll rate (the damp file's), and the steps read
+    // along the walk's heading, whose optima keep to their plan. The damp
+    // file's walk is the same but for one rotation a touchdown.
     FileWalk {
         text: include_str!(
-            "../../experiments/physical-technical-arms-5ms-roll-aim-lean-reach-damp.toml"
+            "../../experiments/physical-technical-arms-5ms-roll-aim-lean-reach-damp-heading.toml"
         ),
-        key: "arms_5ms_damp",
-        label: "damp file: elbow yaws welded, roll damped",
+        key: "arms_5ms_heading",
+        label: "heading file: damp, steps read along the heading",
     },
     // The step-period file with each trial's step drawn from a band.
     FileWalk {
