@@ -244,12 +244,7 @@ pub fn forward_pitch_deg([x, y, z, w]: [f64; 4]) -> f64 {
 /// x axis with joint angles `q` (forward kinematics from the torso), m.
 #[must_use]
 pub fn ahead(model: &NaoModel, feet: [usize; 2], side: usize, q: &[f64]) -> f64 {
-    if q.len() != model.joints.len() {
-        return f64::NAN;
-    }
-    let g = kinematics::body_motions(model, q, &Iso::identity());
-    let x = |i: usize| kinematics::moved(&g[i], model.bodies[i].centre)[0];
-    x(feet[side]) - x(feet[1 - side])
+    apart(model, feet, side, q).map_or(f64::NAN, |[x, _]| x)
 }
 
 /// How far foot `side`'s centre is ahead of the other's along the torso's x
@@ -261,15 +256,21 @@ pub fn ahead_turned(model: &NaoModel, feet: [usize; 2], side: usize, q: &[f64], 
     if turn == 0.0 {
         return ahead(model, feet, side, q);
     }
+    // The torso's axes turned by `turn` in the walk's frame: x_walk =
+    // x cos(turn) − y sin(turn).
+    apart(model, feet, side, q).map_or(f64::NAN, |[x, y]| x * libm::cos(turn) - y * libm::sin(turn))
+}
+
+/// Foot `side`'s centre less the other's along the torso's x and y axes
+/// with joint angles `q`; none for angles of another model.
+fn apart(model: &NaoModel, feet: [usize; 2], side: usize, q: &[f64]) -> Option<[f64; 2]> {
     if q.len() != model.joints.len() {
-        return f64::NAN;
+        return None;
     }
     let g = kinematics::body_motions(model, q, &Iso::identity());
     let at = |i: usize| kinematics::moved(&g[i], model.bodies[i].centre);
     let (a, b) = (at(feet[side]), at(feet[1 - side]));
-    // The torso's axes turned by `turn` in the walk's frame: x_walk =
-    // x cos(turn) − y sin(turn).
-    (a[0] - b[0]) * libm::cos(turn) - (a[1] - b[1]) * libm::sin(turn)
+    Some([a[0] - b[0], a[1] - b[1]])
 }
 
 fn planted(p: &Perception, side: usize) -> bool {
