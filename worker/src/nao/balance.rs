@@ -1578,7 +1578,7 @@ mod tests {
         use super::super::footwork::{ahead, ahead_turned};
         use super::StepGauge;
         let model = crate::nao::model::NaoModel::with_params(0, &ParamValues::default()).unwrap();
-        let body = |name: &str| model.bodies.iter().position(|b| b.name == name).unwrap();
+        let body = |name: &str| model.body_index(name).unwrap();
         let feet = [body("lfoot"), body("rfoot")];
         let q = vec![0.0; model.joints.len()];
         let g = crate::nao::kinematics::body_motions(
@@ -1597,7 +1597,7 @@ mod tests {
         assert!((right - offset * turn.sin()).abs() < 1e-12, "{right}");
         // A bent leg: the reading at no turn is the torso axis's.
         let mut bent = q.clone();
-        let hip = model.joints.iter().position(|j| j.name == "lle3").unwrap();
+        let hip = model.joint_index("lle3").unwrap();
         bent[hip] = -0.4;
         assert_eq!(
             ahead_turned(&model, feet, 0, &bent, 0.0).to_bits(),
