@@ -8,6 +8,11 @@ With `--experiment FILE`, L, the expert set, the fixed values, the walk and
 the physics are that file's (`naofarm trial --experiment FILE`).
 
     scripts/landscape.py [--bin target/release/naofarm] [--sets 200] [--experiment FILE]
+                         [--duration S]
+
+`--duration` sets each trial's simulated seconds (default: the file's, or 10):
+a walk that drifts and falls after its tenth second shows only in longer
+trials (docs/walk.md, "How long the walks last").
 """
 import argparse
 import json
@@ -37,10 +42,12 @@ def parameter_space(experiment):
     return [(p["name"], p["lower"], p["upper"], p["expert"]) for p in exp["parameter"]]
 
 
-def trial(binary, params, trials, seed, experiment=None):
+def trial(binary, params, trials, seed, experiment=None, duration=None):
     walk = ["--walk", "closed-loop"] if experiment is None else ["--experiment", experiment]
     cmd = [binary, "trial", *walk, "--json",
            "--trials", str(trials), "--seed", str(seed)]
+    if duration is not None:
+        cmd += ["--duration", str(duration)]
     for k, v in params.items():
         cmd += ["--param", f"{k}={v}"]
     out = subprocess.run(cmd, check=True, capture_output=True, text=True)
@@ -62,10 +69,13 @@ def main():
     ap.add_argument("--set-trials", type=int, default=10)
     ap.add_argument("--experiment", default=None)
     ap.add_argument("--no-sweeps", action="store_true")
+    ap.add_argument("--duration", type=float, default=None)
     a = ap.parse_args()
     space = parameter_space(a.experiment)
     if a.experiment is not None:
         print(f"(L, expert set, walk and physics of `{a.experiment}`)\n")
+    if a.duration is not None:
+        print(f"(trials of {a.duration:g} s)\n")
     if not a.no_sweeps:
         print(f"## Sweeps ({a.trials} trials per point, seed 3; others at expert)\n")
     for name, lo, hi, _ in ([] if a.no_sweeps else space):
@@ -73,7 +83,7 @@ def main():
               "\n|---|---|---|---|---|---|")
         for i in range(a.points):
             v = lo + (hi - lo) * i / (a.points - 1)
-            r = trial(a.bin, {name: round(v, 5)}, a.trials, 3, a.experiment)
+            r = trial(a.bin, {name: round(v, 5)}, a.trials, 3, a.experiment, a.duration)
             print(f"| {v:.4f} | {r['s']:.2f} | {f(r['mx'])} | {f(r['my'])} | "
                   f"{f(r['planned_m'])} | {stop(r)} |")
         print()
@@ -81,7 +91,7 @@ def main():
     rows = []
     for k in range(a.sets):
         p = {n: round(rng.uniform(lo, hi), 5) for n, lo, hi, _ in space}
-        r = trial(a.bin, p, a.set_trials, 1000 + 100 * k, a.experiment)
+        r = trial(a.bin, p, a.set_trials, 1000 + 100 * k, a.experiment, a.duration)
         rows.append((r["mx"] if r["s"] >= 0.9 else -1.0, r, p))
         r["mx"] = r["mx"] or 0.0
     ok = [x for x in rows if x[1]["s"] >= 0.9]

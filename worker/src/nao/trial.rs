@@ -888,6 +888,42 @@ mod tests {
         assert_ne!(a.measurement.x_m.to_bits(), c.measurement.x_m.to_bits());
     }
 
+    /// The first seconds of a longer trial are the shorter trial, bit for
+    /// bit: nothing in the plan or the controller looks ahead to the trial's
+    /// end. So how long a walk lasts is read by running its trials for
+    /// longer (`scripts/endurance.py`; docs/walk.md, "How long the walks
+    /// last").
+    #[test]
+    fn a_longer_trial_begins_as_the_shorter_one_bit_for_bit() {
+        let torso = |duration_s: f64| {
+            let mut poses = Vec::new();
+            let t = run_observed(
+                0,
+                &ParamValues::default(),
+                3,
+                duration_s,
+                SimSettings::default(),
+                Engine::of(WalkEngine::ClosedLoop),
+                &mut |_, p, _| {
+                    poses.push((
+                        p.torso_position_m.map(f64::to_bits),
+                        p.torso_rotation.map(f64::to_bits),
+                    ));
+                },
+            )
+            .unwrap();
+            assert!(!t.measurement.fell, "{duration_s} s: fell");
+            poses
+        };
+        let (short, long) = (torso(4.0), torso(6.0));
+        assert_eq!(short.len(), 200);
+        assert_eq!(long.len(), 300);
+        assert!(
+            short[..] == long[..short.len()],
+            "the 6 s trial parts from the 4 s one"
+        );
+    }
+
     #[test]
     fn walking_keeps_joints_within_a_degree_of_their_limits() {
         let model = NaoModel::with_params(0, &ParamValues::default()).unwrap();
