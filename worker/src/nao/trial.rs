@@ -890,16 +890,25 @@ mod tests {
 
     /// The first seconds of a longer trial are the shorter trial, bit for
     /// bit: nothing in the plan or the controller looks ahead to the trial's
-    /// end. So how long a walk lasts is read by running its trials for
+    /// end, the stateful feedback of the recommended files included (the
+    /// step gauge read along the heading, the lean placing, the swinging
+    /// arms). So how long a walk lasts is read by running its trials for
     /// longer (`scripts/endurance.py`; docs/walk.md, "How long the walks
     /// last").
     #[test]
     fn a_longer_trial_begins_as_the_shorter_one_bit_for_bit() {
+        let feedback = ParamValues::from_named(&[
+            ("step_aim".to_string(), 0.3),
+            ("step_aim_heading".to_string(), 1.0),
+            ("lean_place".to_string(), 0.5),
+            ("arm_swing".to_string(), 0.4),
+        ])
+        .unwrap();
         let torso = |duration_s: f64| {
             let mut poses = Vec::new();
             let t = run_observed(
                 0,
-                &ParamValues::default(),
+                &feedback,
                 3,
                 duration_s,
                 SimSettings::default(),
