@@ -705,6 +705,9 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
         "step_aim=2",
         "hip_roll_rate_gain=6",
         "step_aim_heading=2",
+        "tilt_vector=1.5",
+        "pitch_hold_gain=-6",
+        "pitch_hold_rad=nan",
     ] {
         let out = naofarm()
             .args(["trial", "--trials", "1", "--param", bad])
@@ -721,6 +724,9 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
         "lean_place",
         "hip_roll_rate_gain",
         "step_aim_heading",
+        "tilt_vector",
+        "pitch_hold_gain",
+        "pitch_hold_rad",
     ] {
         let err = fails(
             naofarm().args(["trial", "--trials", "1", "--param", &format!("{gain}=0.3")]),

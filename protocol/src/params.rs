@@ -66,6 +66,12 @@ pub enum Param {
     HipRollRateGain,
     /// `step_aim_heading`.
     StepAimHeading,
+    /// `tilt_vector`.
+    TiltVector,
+    /// `pitch_hold_gain`.
+    PitchHoldGain,
+    /// `pitch_hold_rad`.
+    PitchHold,
 }
 
 impl Param {
@@ -336,6 +342,39 @@ pub const KNOWN: &[KnownParam] = &[
         unit: "1",
         default: 0.0,
         doc: "the share of the torso's sensed turn (the gyro's yaw rate integrated) by which step_aim's reading of the feet spacing is turned back towards the walk's heading (1: along the heading; a torso that yaws with each step sees its feet's sideways offset as spacing); not given, the closed-loop engine's own (0: along the torso's x axis)",
+    },
+    // How the tilt estimate reads the accelerometer.
+    KnownParam {
+        param: Param::TiltVector,
+        name: "tilt_vector",
+        role: Role::Walk,
+        min: 0.0,
+        max: 1.0,
+        unit: "1",
+        default: 0.0,
+        doc: "the closed loop's tilt estimate's share from the filter that keeps gravity as a vector (turned by the gyro, pulled linearly towards each accelerometer reading) rather than each cycle's accelerometer angle, which the heel strikes of a fast walk bias towards leaning back (1: the vector's alone); not given, the closed-loop engine's own (0: the angles')",
+    },
+    // The torso's mean pitch held by both hips.
+    KnownParam {
+        param: Param::PitchHoldGain,
+        name: "pitch_hold_gain",
+        role: Role::Walk,
+        min: -5.0,
+        max: 5.0,
+        unit: "rad/(rad s)",
+        default: 0.0,
+        doc: "both hips' pitch per rad·s of the integrated excess of the torso's sensed pitch over pitch_hold_rad (capped at 0.4 rad; negative: a torso leaning back further is pitched forward); not given, the closed-loop engine's own (0: off)",
+    },
+    // The pitch the hold keeps.
+    KnownParam {
+        param: Param::PitchHold,
+        name: "pitch_hold_rad",
+        role: Role::Walk,
+        min: -0.5,
+        max: 0.5,
+        unit: "rad",
+        default: 0.0,
+        doc: "the torso pitch pitch_hold_gain holds, rad (negative: leaning back); not given, the closed-loop engine's own (0)",
     },
 ];
 

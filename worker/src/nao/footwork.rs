@@ -25,7 +25,8 @@
 //! How the torso is carried shows in `torso_pitch_deg`, its mean pitch over
 //! the cycles read: a fast walk that leans far back stands on its heels, and
 //! its distance swings with the physics step (docs/walk.md, "Where the walks
-//! part with the time step").
+//! part with the time step"). The closed loop's own reading of that pitch
+//! shows beside it in `tilt_error_deg`, its estimate's mean error.
 
 use super::kinematics::{self, Iso};
 use super::model::NaoModel;
@@ -72,6 +73,10 @@ pub struct Footwork {
     /// moves 0; what a landed foot skids on before it holds shows here, and
     /// the torso is carried on by it.
     pub settle_m: f64,
+    /// The closed loop's pitch estimate less the torso's true pitch, mean
+    /// over the cycles it estimated, degrees (negative: it reads more lean
+    /// back than there is; 0 for a walk that estimates none).
+    pub tilt_error_deg: f64,
 }
 
 impl Footwork {
@@ -84,6 +89,7 @@ impl Footwork {
         let mut reach = 0.0;
         let (mut spacing, mut settle) = (0.0, 0.0);
         let mut pitch = 0.0;
+        let mut tilt_error = 0.0;
         let mut n = 0u32;
         for w in trials {
             sum.stepping_m += w.stepping_m;
@@ -96,6 +102,7 @@ impl Footwork {
             settle += w.settle_m * f64::from(w.touchdowns);
             touchdowns += u64::from(w.touchdowns);
             pitch += w.torso_pitch_deg;
+            tilt_error += w.tilt_error_deg;
             n += 1;
         }
         (n > 0).then(|| {
@@ -117,6 +124,7 @@ impl Footwork {
                 torso_pitch_deg: pitch / k,
                 spacing_m: per_touchdown(spacing),
                 settle_m: per_touchdown(settle),
+                tilt_error_deg: tilt_error / k,
             }
         })
     }
@@ -139,6 +147,8 @@ pub struct Tracker {
     landed_at: [Option<f64>; 2],
     pitch_sum: f64,
     cycles: u32,
+    tilt_error_sum: f64,
+    estimates: u32,
 }
 
 impl Tracker {
@@ -160,6 +170,8 @@ impl Tracker {
             landed_at: [None, None],
             pitch_sum: 0.0,
             cycles: 0,
+            tilt_error_sum: 0.0,
+            estimates: 0,
         }
     }
 
@@ -207,6 +219,13 @@ impl Tracker {
         self.cycles += 1;
     }
 
+    /// Adds the closed loop's pitch estimate `estimate_rad` of the cycle
+    /// whose (true) perception is `p`.
+    pub fn fold_tilt(&mut self, estimate_rad: f64, p: &Perception) {
+        self.tilt_error_sum += estimate_rad.to_degrees() - forward_pitch_deg(p.torso_rotation);
+        self.estimates += 1;
+    }
+
     /// The split so far.
     #[must_use]
     pub fn footwork(&self) -> Footwork {
@@ -224,6 +243,11 @@ impl Tracker {
             settle_m: per_touchdown(self.settle_sum),
             torso_pitch_deg: if self.cycles > 0 {
                 self.pitch_sum / f64::from(self.cycles)
+            } else {
+                0.0
+            },
+            tilt_error_deg: if self.estimates > 0 {
+                self.tilt_error_sum / f64::from(self.estimates)
             } else {
                 0.0
             },

@@ -199,7 +199,10 @@ impl Morphology {
             | Param::StepAim
             | Param::LeanPlace
             | Param::HipRollRateGain
-            | Param::StepAimHeading => None,
+            | Param::StepAimHeading
+            | Param::TiltVector
+            | Param::PitchHoldGain
+            | Param::PitchHold => None,
         }
     }
 

@@ -484,6 +484,7 @@ pub fn run_observed(
             Some(b) => {
                 let sensed = noisy(&perception, &mut rng);
                 let c = b.update(&sensed, CYCLE_S);
+                footwork.fold_tilt(b.tilt()[1], &perception);
                 if let Some(pacing) = paced.as_mut() {
                     landing = pacing.gauge.touchdown(&sensed);
                 }
