@@ -708,6 +708,7 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
         "tilt_vector=1.5",
         "pitch_hold_gain=-6",
         "pitch_hold_rad=nan",
+        "pitch_hold_ankle=1.1",
     ] {
         let out = naofarm()
             .args(["trial", "--trials", "1", "--param", bad])
@@ -727,6 +728,7 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
         "tilt_vector",
         "pitch_hold_gain",
         "pitch_hold_rad",
+        "pitch_hold_ankle",
     ] {
         let err = fails(
             naofarm().args(["trial", "--trials", "1", "--param", &format!("{gain}=0.3")]),

@@ -72,6 +72,8 @@ pub enum Param {
     PitchHoldGain,
     /// `pitch_hold_rad`.
     PitchHold,
+    /// `pitch_hold_ankle`.
+    PitchHoldAnkle,
 }
 
 impl Param {
@@ -375,6 +377,17 @@ pub const KNOWN: &[KnownParam] = &[
         unit: "rad",
         default: 0.0,
         doc: "the torso pitch pitch_hold_gain holds, rad (negative: leaning back); not given, the closed-loop engine's own (0)",
+    },
+    // Where the hold acts.
+    KnownParam {
+        param: Param::PitchHoldAnkle,
+        name: "pitch_hold_ankle",
+        role: Role::Walk,
+        min: 0.0,
+        max: 1.0,
+        unit: "1",
+        default: 0.0,
+        doc: "the share of pitch_hold_gain's hold put on both ankles' pitch, the rest on both hips' (the same sign on each: 0.5 splits it evenly); not given, the closed-loop engine's own (0: the hips alone)",
     },
 ];
 

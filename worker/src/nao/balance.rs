@@ -19,9 +19,14 @@
 //!   right").
 //! - **Pitch hold**: with `pitch_hold_gain` (0 by default) both hips' pitch
 //!   carries the integral of the estimated pitch's excess over
-//!   `pitch_hold_rad` (capped at [`PITCH_HOLD_MAX`]): a slow bias that holds
-//!   the torso's mean pitch where the hip-pitch gain, switched from leg to
-//!   leg with the load every step, costs the walk its pace.
+//!   `pitch_hold_rad` (capped at [`PITCH_HOLD_MAX`]), or with
+//!   `pitch_hold_ankle` a share of it both ankles' pitch: a slow bias the
+//!   same on both legs, where the hip-pitch gain, switched from leg to leg
+//!   with the load every step, costs the walk its pace. On the heading
+//!   file's walk it leans against the walk's first lean, then grows to its
+//!   cap within about 20 s and keeps the walk standing at a lean of 20-30°
+//!   for a minute (docs/walk.md, "The tilt estimate, read right, and the
+//!   pitch held").
 //! - **Sagittal balance**: the stance hip pitch turns against the torso's
 //!   pitch ([`Gains::hip_pitch`]). Without it the torso leans back a little
 //!   more with every fast step (−2° on average at 0.22 s steps, −40° and a fall
@@ -115,7 +120,10 @@ pub const GAIT: GaitConfig = GaitConfig {
 /// Time constant of the tilt estimate's pull towards the accelerometer, s.
 pub const TILT_FILTER_S: f64 = 0.5;
 
-/// The largest pitch the hold puts on both hips, rad.
+/// The largest pitch the hold puts on both legs, rad (hips and ankles
+/// together). On the split hold's expert (20 trials of 60 s from 777) 0.3
+/// stands 75 % of the trials, 0.4 all of them, 0.6 and 0.8 45 and 40 %:
+/// the larger the cap, the more upright and the shorter the walk.
 pub const PITCH_HOLD_MAX: f64 = 0.4;
 
 /// Gravity, m/s²: the gravity-vector filter's start (the torso upright).
@@ -162,13 +170,15 @@ pub struct Gains {
     pub pitch_hold_gain: f64,
     /// The torso pitch the hold keeps, rad (negative: leaning back).
     pub pitch_hold: f64,
+    /// The hold's share on both ankles' pitch, the rest on the hips'.
+    pub pitch_hold_ankle: f64,
 }
 
 impl Gains {
     /// These gains with the parameter set's `hip_pitch_gain`,
     /// `ankle_pitch_gain`, `turn_place`, `step_aim`, `step_aim_heading`,
-    /// `lean_place`, `hip_roll_rate_gain`, `tilt_vector`, `pitch_hold_gain`
-    /// and `pitch_hold_rad`, where it gives them (the registry's feedback
+    /// `lean_place`, `hip_roll_rate_gain`, `tilt_vector`, `pitch_hold_gain`,
+    /// `pitch_hold_rad` and `pitch_hold_ankle`, where it gives them (the registry's feedback
     /// parameters; an experiment may fix or optimise them).
     #[must_use]
     pub fn with_params(self, params: &ParamValues) -> Self {
@@ -191,6 +201,9 @@ impl Gains {
                 .given(Param::PitchHoldGain)
                 .unwrap_or(self.pitch_hold_gain),
             pitch_hold: params.given(Param::PitchHold).unwrap_or(self.pitch_hold),
+            pitch_hold_ankle: params
+                .given(Param::PitchHoldAnkle)
+                .unwrap_or(self.pitch_hold_ankle),
             ..self
         }
     }
@@ -198,7 +211,7 @@ impl Gains {
     /// Each gain by its field name: the registry parameter it is also given
     /// by, where it is one (which sets its range: [`Gains::range`]), and
     /// the field.
-    pub const FIELDS: [GainField; 12] = [
+    pub const FIELDS: [GainField; 13] = [
         ("ankle_pitch", Some(Param::AnklePitchGain), |g| {
             &mut g.ankle_pitch
         }),
@@ -221,6 +234,9 @@ impl Gains {
             &mut g.pitch_hold_gain
         }),
         ("pitch_hold", Some(Param::PitchHold), |g| &mut g.pitch_hold),
+        ("pitch_hold_ankle", Some(Param::PitchHoldAnkle), |g| {
+            &mut g.pitch_hold_ankle
+        }),
     ];
 
     /// The range a gain of [`Gains::FIELDS`] may be set in, by its
@@ -254,6 +270,7 @@ pub const GAINS: Gains = Gains {
     tilt_vector: 0.0,
     pitch_hold_gain: 0.0,
     pitch_hold: 0.0,
+    pitch_hold_ankle: 0.0,
 };
 
 /// The readings [`StepGauge`] keeps: a step's landed spacing over its aim,
@@ -480,8 +497,12 @@ impl Balance {
             let cap = PITCH_HOLD_MAX / g.pitch_hold_gain.abs();
             self.held = (self.held + (pitch - g.pitch_hold) * dt).clamp(-cap, cap);
             let hold = g.pitch_hold_gain * self.held;
+            let ankle = g.pitch_hold_ankle;
             for leg in &mut c.legs {
-                leg[2] += hold;
+                leg[2] += (1.0 - ankle) * hold;
+                if ankle != 0.0 {
+                    leg[4] += ankle * hold;
+                }
             }
         }
         // Off, exactly 0 whatever the estimate (never 0 × a non-finite turn).
@@ -2700,10 +2721,9 @@ mod tests {
 
     /// The heel strikes of the held walk shake the accelerometer, and the
     /// per-cycle angle filter's pitch reads more lean back than the torso
-    /// has (each trial's mean error, estimate less the truth, measured
-    /// −4.9 to −6.2° over 4 trials of 30 s); the gravity-vector filter of
-    /// the file (`tilt_vector = 1`) reads it within 1° (−0.26 to 0.77°
-    /// over 20 trials).
+    /// has (each trial's mean error, estimate less the truth, over 4
+    /// trials of 30 s: −4.5 to −5.1°); the gravity-vector filter of the file
+    /// (`tilt_vector = 1`) reads it within 1° (−0.08 to −0.21°).
     #[test]
     fn the_vector_filter_reads_the_pitch_the_shaken_angle_filter_misreads() {
         let (_, physics, held) = shipped(HOLD_FILE);
@@ -2723,20 +2743,22 @@ mod tests {
         }
     }
 
-    /// The hold file's expert walks the pace issue's 10 s (s ≥ 0.7, ≥ 4.0 m;
-    /// measured over 20 trials: s 1.00, 4.12 m) and stands through 30 s
-    /// (measured s 0.90); without the hold (`pitch_hold_gain = 0`, the
-    /// estimate still the vector's) it leans back further every second and
-    /// falls in every trial (s 0.00).
+    /// The hold file's expert walks the pace issue's 10 s as planned (s ≥
+    /// 0.7, ≥ 4.0 m, within 10 % of its plan; measured over 20 trials: s 1.00, 4.644 m
+    /// of 4.631 m planned)
+    /// and stands through a minute (measured: s 1.00, 21.21 m); without the hold
+    /// (`pitch_hold_gain = 0`, the estimate still the vector's) it leans
+    /// back further every second and falls in every trial by 30 s
+    /// (s 0.00).
     #[test]
-    fn holding_the_pitch_stands_the_heading_expert_through_thirty_seconds() {
+    fn holding_the_pitch_stands_the_heading_expert_through_a_minute() {
         let (_, physics, held) = shipped(HOLD_FILE);
-        assert_eq!(held.given(Param::PitchHoldGain), Some(-1.0));
+        assert_eq!(held.given(Param::PitchHoldGain), Some(-0.5));
+        assert_eq!(held.given(Param::PitchHoldAnkle), Some(0.5));
+        walks_at_pace_as_planned(&held, 20, physics);
+        let (s, ..) = summary(&lasting(&held, 20, 60.0, physics));
+        assert!(s >= 0.85, "held, 60 s: s {s}");
         let unheld = with_values(held, &[("pitch_hold_gain", 0.0)]);
-        let (s, mx, _) = summary(&lasting(&held, 20, 10.0, physics));
-        assert!(s >= 0.7 && mx >= 4.0, "10 s: s {s}, mx {mx}");
-        let (s, ..) = summary(&lasting(&held, 20, 30.0, physics));
-        assert!(s >= 0.8, "held, 30 s: s {s}");
         let (s, ..) = summary(&lasting(&unheld, 20, 30.0, physics));
         assert!(s <= 0.1, "unheld, 30 s: s {s}");
     }

@@ -202,7 +202,8 @@ impl Morphology {
             | Param::StepAimHeading
             | Param::TiltVector
             | Param::PitchHoldGain
-            | Param::PitchHold => None,
+            | Param::PitchHold
+            | Param::PitchHoldAnkle => None,
         }
     }
 
