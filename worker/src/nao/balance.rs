@@ -2719,6 +2719,56 @@ mod tests {
         run_many(0, p, batch, duration_s, physics, closed()).unwrap()
     }
 
+    /// The hold integrates the estimated pitch's excess over its pitch:
+    /// a torso held 0.2 rad further back than `pitch_hold_rad` gets,
+    /// after t seconds, gain × (−0.2 t) on both legs (the same on each,
+    /// whatever their loads), split between the hips and the ankles by
+    /// `pitch_hold_ankle`, until it reaches [`super::PITCH_HOLD_MAX`];
+    /// off, or held at its own pitch, it adds nothing.
+    #[test]
+    fn the_pitch_hold_integrates_to_its_cap_on_both_legs() {
+        use super::{Balance, Correction, Gains, GAINS, PITCH_HOLD_MAX};
+        let held = |pitch: f64, cycles: u32, gain: f64, ankle: f64| -> Correction {
+            let mut b = Balance::new(Gains {
+                tilt_vector: 1.0,
+                pitch_hold_gain: gain,
+                pitch_hold: -0.2,
+                pitch_hold_ankle: ankle,
+                // The stance hip's own pitch gain off: the hold alone.
+                hip_pitch: 0.0,
+                ..GAINS
+            });
+            let p = still([-9.81 * pitch.sin(), 0.0, 9.81 * pitch.cos()], [45.0, 15.0]);
+            let mut c = Correction::default();
+            for _ in 0..cycles {
+                c = b.update(&p, 0.02);
+            }
+            c
+        };
+        // Settled on −0.4 rad (1000 cycles, 20 s): the cap, a quarter of
+        // it on each hip and each ankle at the half split (−0.5 × −0.2 ×
+        // 20 s = 2 rad would be far past it).
+        let c = held(-0.4, 1000, -0.5, 0.5);
+        for leg in &c.legs {
+            assert!((leg[2] - PITCH_HOLD_MAX / 2.0).abs() < 1e-9, "{c:?}");
+            assert!((leg[4] - PITCH_HOLD_MAX / 2.0).abs() < 1e-9, "{c:?}");
+        }
+        // Within the cap it is the integral: 1 s more of 0.2 rad past
+        // the held pitch adds 0.5 × 0.2 = 0.1 rad (the estimate settles
+        // within a few of the filter's 0.5 s, so compare 2.5 s with 3.5 s;
+        // the cap, 0.4 / 0.5 = 0.8 rad·s, is not reached before 4 s).
+        let (a, b) = (held(-0.4, 125, -0.5, 0.0), held(-0.4, 175, -0.5, 0.0));
+        let grown = b.legs[0][2] - a.legs[0][2];
+        assert!((grown - 0.1).abs() < 2e-3, "{grown}");
+        assert!(b.legs[0][2] < PITCH_HOLD_MAX, "{b:?}");
+        assert!(a.legs[0][2] > 0.0 && a.legs[0][2] < PITCH_HOLD_MAX);
+        assert_eq!(a.legs[0][2], a.legs[1][2]);
+        // The hips alone: the ankles get nothing, exactly.
+        assert_eq!(a.legs[0][4], 0.0);
+        // Off: nothing at all.
+        assert_eq!(held(-0.4, 1000, 0.0, 0.5).legs, [[0.0; 6]; 2]);
+    }
+
     /// The heel strikes of the held walk shake the accelerometer, and the
     /// per-cycle angle filter's pitch reads more lean back than the torso
     /// has (each trial's mean error, estimate less the truth, over 4
