@@ -356,7 +356,7 @@ pub const KNOWN: &[KnownParam] = &[
         default: 0.0,
         doc: "the closed loop's tilt estimate's share from the filter that keeps gravity as a vector (turned by the gyro, pulled linearly towards each accelerometer reading) rather than each cycle's accelerometer angle, which the heel strikes of a fast walk bias towards leaning back (1: the vector's alone); not given, the closed-loop engine's own (0: the angles')",
     },
-    // The torso's mean pitch held by both hips.
+    // The torso's lean held by both legs.
     KnownParam {
         param: Param::PitchHoldGain,
         name: "pitch_hold_gain",
@@ -365,7 +365,7 @@ pub const KNOWN: &[KnownParam] = &[
         max: 5.0,
         unit: "rad/(rad s)",
         default: 0.0,
-        doc: "both hips' pitch per rad·s of the integrated excess of the torso's sensed pitch over pitch_hold_rad (capped at 0.4 rad; negative: a torso leaning back further is pitched forward); not given, the closed-loop engine's own (0: off)",
+        doc: "both legs' pitch per rad·s of the integrated excess of the torso's sensed pitch over pitch_hold_rad, on the hips and the ankles as pitch_hold_ankle shares it (capped at 0.4 rad; negative: a torso leaning back further is pitched forward); not given, the closed-loop engine's own (0: off)",
     },
     // The pitch the hold keeps.
     KnownParam {

@@ -12,11 +12,12 @@
 //!   error. By default the pull is towards each cycle's accelerometer angle;
 //!   the heel strikes of a fast walk shake that reading (its vertical part's
 //!   sd 9-11 m/s² against its 9.8 m/s² mean), and the mean of those angles
-//!   reads 15° more lean back than the torso has. With `tilt_vector` the
-//!   filter keeps the gravity vector instead, turned by the gyro and pulled
-//!   linearly towards each reading, whose mean is gravity's: its pitch keeps
-//!   within 1-2° of the torso's (docs/walk.md, "The tilt estimate, read
-//!   right").
+//!   reads the torso further back than it leans (by 5-11° on the held walks
+//!   below, each trial's mean). With `tilt_vector` the filter keeps the
+//!   gravity vector instead, turned by the gyro and pulled linearly towards
+//!   each reading, whose mean is gravity's: its pitch keeps within 1° of
+//!   the torso's (docs/walk.md, "The tilt estimate, read right, and the
+//!   pitch held").
 //! - **Pitch hold**: with `pitch_hold_gain` (0 by default) both hips' pitch
 //!   carries the integral of the estimated pitch's excess over
 //!   `pitch_hold_rad` (capped at [`PITCH_HOLD_MAX`]), or with
@@ -165,8 +166,9 @@ pub struct Gains {
     /// The tilt estimate's share taken from the gravity-vector filter (0:
     /// the per-cycle angle filter; 1: the vector's alone).
     pub tilt_vector: f64,
-    /// Both hips' pitch per rad·s of the estimated pitch's excess over
-    /// `pitch_hold`, integrated (0: off).
+    /// Both legs' pitch per rad·s of the estimated pitch's excess over
+    /// `pitch_hold`, integrated (0: off), on the hips and the ankles by
+    /// `pitch_hold_ankle`.
     pub pitch_hold_gain: f64,
     /// The torso pitch the hold keeps, rad (negative: leaning back).
     pub pitch_hold: f64,
@@ -550,12 +552,7 @@ mod tests {
     /// `n` noisy trials of `p` on the closed loop, 10 s each, seeds from 777
     /// (Table IV's), on 2 threads.
     fn from_777(p: &ParamValues, n: u64, physics: SimSettings) -> Vec<NaoTrial> {
-        let batch = Batch {
-            seed0: 777,
-            n,
-            threads: 2,
-        };
-        run_many(0, p, batch, 10.0, physics, closed()).unwrap()
+        lasting(p, n, 10.0, physics)
     }
 
     /// `n` trials of `params` from seed 777 with `physics`, held to the pace

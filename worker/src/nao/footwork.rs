@@ -229,28 +229,16 @@ impl Tracker {
     /// The split so far.
     #[must_use]
     pub fn footwork(&self) -> Footwork {
-        let per_touchdown = |sum: f64| {
-            if self.work.touchdowns > 0 {
-                sum / f64::from(self.work.touchdowns)
-            } else {
-                0.0
-            }
-        };
+        // A sum's mean over `n` readings; 0 when there were none.
+        let mean = |sum: f64, n: u32| if n > 0 { sum / f64::from(n) } else { 0.0 };
+        let per_touchdown = |sum: f64| mean(sum, self.work.touchdowns);
         Footwork {
             lean_m: self.offset - self.offset0,
             overreach_m: per_touchdown(self.reach_sum),
             spacing_m: per_touchdown(self.spacing_sum),
             settle_m: per_touchdown(self.settle_sum),
-            torso_pitch_deg: if self.cycles > 0 {
-                self.pitch_sum / f64::from(self.cycles)
-            } else {
-                0.0
-            },
-            tilt_error_deg: if self.estimates > 0 {
-                self.tilt_error_sum / f64::from(self.estimates)
-            } else {
-                0.0
-            },
+            torso_pitch_deg: mean(self.pitch_sum, self.cycles),
+            tilt_error_deg: mean(self.tilt_error_sum, self.estimates),
             ..self.work
         }
     }
