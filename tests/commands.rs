@@ -709,6 +709,7 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
         "pitch_hold_gain=-6",
         "pitch_hold_rad=nan",
         "pitch_hold_ankle=1.1",
+        "step_aim_before=-0.1",
     ] {
         let out = naofarm()
             .args(["trial", "--trials", "1", "--param", bad])
@@ -729,6 +730,7 @@ fn trial_prints_the_table_iv_row_and_refuses_bad_parameters() {
         "pitch_hold_gain",
         "pitch_hold_rad",
         "pitch_hold_ankle",
+        "step_aim_before",
     ] {
         let err = fails(
             naofarm().args(["trial", "--trials", "1", "--param", &format!("{gain}=0.3")]),

@@ -120,7 +120,7 @@ pub enum WalkEngine {
 
 /// A feedback gain (`hip_pitch_gain`, `ankle_pitch_gain`, `turn_place`, `step_aim`,
 /// `lean_place`, `hip_roll_rate_gain`, `step_aim_heading`, `tilt_vector`,
-/// `pitch_hold_gain`, `pitch_hold_rad`, `pitch_hold_ankle`) needs a walk with
+/// `pitch_hold_gain`, `pitch_hold_rad`, `pitch_hold_ankle`, `step_aim_before`) needs a walk with
 /// feedback: the open loop has none to give it to, so a parameter set for it
 /// that names one is refused (by an experiment file and by `naofarm trial`).
 pub fn gain_has_feedback(walk: WalkEngine, name: &str) -> Result<(), String> {
@@ -138,6 +138,7 @@ pub fn gain_has_feedback(walk: WalkEngine, name: &str) -> Result<(), String> {
                 | params::Param::PitchHoldGain
                 | params::Param::PitchHold
                 | params::Param::PitchHoldAnkle
+                | params::Param::StepAimBefore
         )
     });
     if gain && walk == WalkEngine::OpenLoop {

@@ -74,6 +74,8 @@ pub enum Param {
     PitchHold,
     /// `pitch_hold_ankle`.
     PitchHoldAnkle,
+    /// `step_aim_before`.
+    StepAimBefore,
 }
 
 impl Param {
@@ -388,6 +390,17 @@ pub const KNOWN: &[KnownParam] = &[
         unit: "1",
         default: 0.0,
         doc: "the share of pitch_hold_gain's hold put on both ankles' pitch, the rest on both hips' (the same sign on each: 0.5 splits it evenly); not given, the closed-loop engine's own (0: the hips alone)",
+    },
+    // When step_aim reads a step.
+    KnownParam {
+        param: Param::StepAimBefore,
+        name: "step_aim_before",
+        role: Role::Walk,
+        min: 0.0,
+        max: 1.0,
+        unit: "1",
+        default: 0.0,
+        doc: "the share of step_aim's reading of the feet's spacing taken from the sensed joint angles of the cycle before the touchdown, while the other foot still carries, the rest from the touchdown's own cycle, by which the other foot may have begun its swing (1: the cycle before's alone); not given, the closed-loop engine's own (0: the touchdown's)",
     },
 ];
 

@@ -30,8 +30,9 @@ use crate::{
 /// trial request's physics carries `firm_stop_lookahead`; 16 since it
 /// carries `weld_elbow_yaws`; 17 since `hip_roll_rate_gain` joined the
 /// registry; 18 since `step_aim_heading` joined it; 19 since `tilt_vector`,
-/// `pitch_hold_gain`, `pitch_hold_rad` and `pitch_hold_ankle` joined it.
-pub const WIRE_VERSION: u8 = 19;
+/// `pitch_hold_gain`, `pitch_hold_rad` and `pitch_hold_ankle` joined it; 20
+/// since `step_aim_before` joined it.
+pub const WIRE_VERSION: u8 = 20;
 /// Largest message accepted, in bytes (checked before any allocation).
 pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
 const MAGIC: [u8; 2] = *b"NF";

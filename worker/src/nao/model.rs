@@ -203,7 +203,8 @@ impl Morphology {
             | Param::TiltVector
             | Param::PitchHoldGain
             | Param::PitchHold
-            | Param::PitchHoldAnkle => None,
+            | Param::PitchHoldAnkle
+            | Param::StepAimBefore => None,
         }
     }
 

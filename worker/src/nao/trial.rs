@@ -456,6 +456,7 @@ pub fn run_observed(
             gauge,
             plan: Paced::new(),
             last_aim: None,
+            prior_q: Vec::new(),
         });
     let mut run = 0;
     for k in 0..cycles {
@@ -501,6 +502,9 @@ pub fn run_observed(
             }
         };
         let mut sensed_q = Vec::new();
+        // This cycle's sensed angles, kept for the next cycle's touchdown.
+        let keep = paced.as_ref().is_some_and(|p| p.gauge.before() > 0.0);
+        let mut this_q = Vec::new();
         let cmd: Vec<f64> = perception
             .joint_angles_rad
             .iter()
@@ -511,6 +515,9 @@ pub fn run_observed(
                 let measured = m + sensor * gauss(&mut rng);
                 if landing.is_some() {
                     sensed_q.push(measured);
+                }
+                if keep {
+                    this_q.push(measured);
                 }
                 let target = aim.as_ref().map_or(*b, |q| q[j]);
                 (b - a) / CYCLE_S
@@ -530,8 +537,20 @@ pub fn run_observed(
                     .as_ref()
                     .map_or(0.0, |b| pacing.gauge.turn_back(b.turn()));
                 let landed = ahead_turned(&model, sim.foot_bodies(), side, &sensed_q, turn);
+                let before = pacing.gauge.before();
+                // 0: the touchdown's own reading, exactly.
+                let landed = if before == 0.0 {
+                    landed
+                } else {
+                    let prior =
+                        ahead_turned(&model, sim.foot_bodies(), side, &pacing.prior_q, turn);
+                    (1.0 - before) * landed + before * prior
+                };
                 pacing.gauge.fold(landed, aimed);
             }
+        }
+        if let (true, Some(pacing)) = (keep, paced.as_mut()) {
+            pacing.prior_q = this_q;
         }
         capped.fold(&cmd);
         run = k + 1;
@@ -594,6 +613,9 @@ struct Pacing {
     plan: Paced,
     /// The last finished step and where its swing foot was aimed to land, m.
     last_aim: Option<(usize, f64)>,
+    /// The last cycle's sensed joint angles (kept with `step_aim_before`;
+    /// empty before the first cycle, which then reads as no reading).
+    prior_q: Vec<f64>,
 }
 
 /// The sensors of `p` as the closed-loop walk reads them: gyro, accelerometer
