@@ -1095,6 +1095,7 @@ fn bench_sim_reports_its_shares_over_rounds() {
         "arms_5ms_roll",
         "arms_5ms_roll_aim_lean",
         "arms_5ms_heading",
+        "arms_5ms_before",
         "arms",
         "firm",
         "band",

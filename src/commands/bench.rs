@@ -432,7 +432,7 @@ impl FileWalk {
 }
 
 /// The files `bench sim` measures, the converged first.
-const FILES: [FileWalk; 10] = [
+const FILES: [FileWalk; 11] = [
     // Converged physics with its fixed values.
     FileWalk {
         text: include_str!("../../experiments/physical-technical-converged.toml"),
@@ -493,6 +493,17 @@ const FILES: [FileWalk; 10] = [
         ),
         key: "arms_5ms_heading",
         label: "heading file: damp, steps read along the heading",
+    },
+    // The heading file with the tilt read from gravity as a vector, the
+    // torso's lean held by both legs, and each step read before the other
+    // foot leaves: the file whose optima walk 6 m at every seed as planned
+    // (docs/walk.md, "Steps read before the other foot leaves").
+    FileWalk {
+        text: include_str!(
+            "../../experiments/physical-technical-arms-5ms-roll-aim-lean-reach-damp-heading-hold-before.toml"
+        ),
+        key: "arms_5ms_before",
+        label: "before file: heading, held, read before",
     },
     // The step-period file with each trial's step drawn from a band.
     FileWalk {
