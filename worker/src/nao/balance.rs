@@ -1808,12 +1808,7 @@ mod tests {
         assert_eq!(heading.given(Param::StepAimHeading), Some(1.0));
         assert_eq!(torso_axis.given(Param::StepAimHeading), None);
         let thigh = [("ThighRelHip2_Z", -0.0998)];
-        let ratio = |p: &ParamValues| {
-            let p = with_values(*p, &thigh);
-            let (s, mx, _) = summary(&from_777(&p, 40, physics));
-            let planned = trial::planned_travel_m(0, &p, 10.0, closed()).unwrap();
-            (s, mx, mx / planned)
-        };
+        let ratio = |p: &ParamValues| against_plan(&with_values(*p, &thigh), 40, physics);
         let (s_torso, mx_torso, torso) = ratio(&torso_axis);
         let (s_heading, mx_heading, along) = ratio(&heading);
         println!(
@@ -1825,6 +1820,13 @@ mod tests {
             along <= 1.07 && s_heading >= 0.9,
             "heading: {along}, s {s_heading}"
         );
+    }
+
+    /// s, mx and mx over the plan's distance of `n` trials of `p` from 777.
+    fn against_plan(p: &ParamValues, n: u64, physics: SimSettings) -> (f64, f64, f64) {
+        let (s, mx, _) = summary(&from_777(p, n, physics));
+        let planned = trial::planned_travel_m(0, p, 10.0, closed()).unwrap();
+        (s, mx, mx / planned)
     }
 
     /// Experiment 2 of the roll-aim file with the feet placed against the
@@ -2836,12 +2838,7 @@ mod tests {
             ("height_lift", 0.025775345455140035),
             ("xlength_step_max", 0.1064705891676588),
         ];
-        let ratio = |p: &ParamValues| {
-            let p = with_values(*p, &optimum);
-            let (s, mx, _) = summary(&from_777(&p, 20, physics));
-            let planned = trial::planned_travel_m(0, &p, 10.0, closed()).unwrap();
-            (s, mx, mx / planned)
-        };
+        let ratio = |p: &ParamValues| against_plan(&with_values(*p, &optimum), 20, physics);
         let (s_touchdown, mx_touchdown, at) = ratio(&touchdown);
         let (s_before, mx_before, read_before) = ratio(&before);
         println!(
