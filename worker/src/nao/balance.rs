@@ -90,8 +90,7 @@
 //! `hip_pitch_gain`, `ankle_pitch_gain`, `turn_place`, `step_aim`,
 //! `step_aim_heading`, `step_aim_before`, `lean_place`, `hip_roll_rate_gain`,
 //! `tilt_vector`, `pitch_hold_gain`, `pitch_hold_rad`, `pitch_hold_ankle`):
-//! a set that gives
-//! one replaces the constant here.
+//! a set that gives one replaces the constant here.
 //! The arms configuration (`experiments/physical-technical-arms.toml`)
 //! swings the arms: docs/walk.md, "Swinging arms at the league's pace"; at
 //! 4 × 5 ms (`physical-technical-arms-5ms.toml`) its walks keep to their
@@ -188,10 +187,10 @@ pub struct Gains {
 impl Gains {
     /// These gains with the parameter set's `hip_pitch_gain`,
     /// `ankle_pitch_gain`, `turn_place`, `step_aim`, `step_aim_heading`,
-    /// `step_aim_before`,
-    /// `lean_place`, `hip_roll_rate_gain`, `tilt_vector`, `pitch_hold_gain`,
-    /// `pitch_hold_rad` and `pitch_hold_ankle`, where it gives them (the registry's feedback
-    /// parameters; an experiment may fix or optimise them).
+    /// `step_aim_before`, `lean_place`, `hip_roll_rate_gain`, `tilt_vector`,
+    /// `pitch_hold_gain`, `pitch_hold_rad` and `pitch_hold_ankle`, where it
+    /// gives them (the registry's feedback parameters; an experiment may fix
+    /// or optimise them).
     #[must_use]
     pub fn with_params(self, params: &ParamValues) -> Self {
         Self {

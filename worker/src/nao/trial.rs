@@ -458,6 +458,10 @@ pub fn run_observed(
             last_aim: None,
             prior_q: Vec::new(),
         });
+    // A cycle's sensed joint angles, when the step gauge reads them: at a
+    // touchdown, or in every cycle with `step_aim_before` (kept for the next
+    // cycle's touchdown in `Pacing::prior_q`, the two buffers swapped).
+    let mut sensed_q = Vec::new();
     let mut run = 0;
     for k in 0..cycles {
         let t = k as f64 * CYCLE_S;
@@ -501,10 +505,8 @@ pub fn run_observed(
                 Some(gait.corrected(planned, &c))
             }
         };
-        let mut sensed_q = Vec::new();
-        // This cycle's sensed angles, kept for the next cycle's touchdown.
         let keep = paced.as_ref().is_some_and(|p| p.gauge.before() > 0.0);
-        let mut this_q = Vec::new();
+        sensed_q.clear();
         let cmd: Vec<f64> = perception
             .joint_angles_rad
             .iter()
@@ -513,11 +515,8 @@ pub fn run_observed(
             .enumerate()
             .map(|(j, ((m, a), b))| {
                 let measured = m + sensor * gauss(&mut rng);
-                if landing.is_some() {
+                if keep || landing.is_some() {
                     sensed_q.push(measured);
-                }
-                if keep {
-                    this_q.push(measured);
                 }
                 let target = aim.as_ref().map_or(*b, |q| q[j]);
                 (b - a) / CYCLE_S
@@ -550,7 +549,7 @@ pub fn run_observed(
             }
         }
         if let (true, Some(pacing)) = (keep, paced.as_mut()) {
-            pacing.prior_q = this_q;
+            std::mem::swap(&mut pacing.prior_q, &mut sensed_q);
         }
         capped.fold(&cmd);
         run = k + 1;
