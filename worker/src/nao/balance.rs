@@ -770,6 +770,7 @@ mod tests {
     /// takes the 100. Seed 1's Optim.1 of the file: 6.046 → 5.515 m (40
     /// trials).
     #[test]
+    #[ignore = "long: a superseded 4 × 5 ms file's claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_feedback_carries_the_arms_walk_at_5ms_with_the_wider_hip_roll() {
         let (_, physics, expert) = shipped(include_str!(
             "../../../experiments/physical-technical-arms-5ms-roll.toml"
@@ -1311,6 +1312,7 @@ mod tests {
     /// 1–3 (`scripts/stops.py`); the optimum s 0.98, 6.034 m of 6.167 m
     /// planned, 0.05° at worst.
     #[test]
+    #[ignore = "long: a superseded 4 × 5 ms file's claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_wider_hip_roll_at_5ms_keeps_the_stops_and_finds_six_metres_at_seed_1() {
         let (exp, physics, expert) = shipped(include_str!(
             "../../../experiments/physical-technical-arms-5ms-roll.toml"
@@ -1319,18 +1321,7 @@ mod tests {
             (physics.substeps, expert.given(Param::HipRollComp)),
             (4, Some(0.09))
         );
-        keeps_the_stops_and_walks_six_metres(
-            &exp,
-            physics,
-            &expert,
-            &[
-                ("ThighRelHip2_Z", -0.07248014550316677),
-                ("ratio_flexion", 0.7337248544360496),
-                ("long_offset_MidAnkles_2_Torso_Init", 0.007568212834695239),
-                ("height_lift", 0.027382255547773543),
-                ("xlength_step_max", 0.10655390587942211),
-            ],
-        );
+        keeps_the_stops_and_walks_six_metres(&exp, physics, &expert, &ROLL_SEED1_OPTIM1);
     }
 
     /// The roll file with its steps aimed short by the legs' overreach
@@ -1373,23 +1364,13 @@ mod tests {
     /// every stop. Measured: L 0.30° at worst over seeds 1–3
     /// (`scripts/stops.py`); the optimum s 0.99, 6.167 m of 6.235 m planned.
     #[test]
+    #[ignore = "long: a superseded 4 × 5 ms file's claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_aimed_roll_file_keeps_the_stops_and_finds_six_metres_at_seed_1() {
         let (exp, physics, expert) = shipped(include_str!(
             "../../../experiments/physical-technical-arms-5ms-roll-aim.toml"
         ));
         assert_eq!(expert.given(Param::StepAim), Some(0.3));
-        keeps_the_stops_and_walks_six_metres(
-            &exp,
-            physics,
-            &expert,
-            &[
-                ("ThighRelHip2_Z", -0.07723586923111701),
-                ("ratio_flexion", 0.7913222324625083),
-                ("long_offset_MidAnkles_2_Torso_Init", 0.008266306443202406),
-                ("height_lift", 0.025000629956579354),
-                ("xlength_step_max", 0.10772545353299341),
-            ],
-        );
+        keeps_the_stops_and_walks_six_metres(&exp, physics, &expert, &ROLL_AIM_SEED1_OPTIM1);
     }
 
     /// A torso leaning forward steps ahead
@@ -1559,6 +1540,7 @@ mod tests {
     /// stop. Measured: L 0.22–0.29° at seeds 1–5; the optimum s 0.99, 6.278
     /// m of 6.288 m planned, 0.07° at worst.
     #[test]
+    #[ignore = "long: a superseded 4 × 5 ms file's claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_capped_lean_file_keeps_the_stops_and_finds_six_metres_at_seed_3() {
         let (exp, physics, expert) = shipped(include_str!(
             "../../../experiments/physical-technical-arms-5ms-roll-aim-lean-reach.toml"
@@ -1670,6 +1652,7 @@ mod tests {
     /// Measured: L 0.24–0.46° at seeds 1–5; the optimum s 0.91, 6.030 m of
     /// 6.005 m planned, 0.07° at worst.
     #[test]
+    #[ignore = "long: a superseded 4 × 5 ms file's claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_damp_file_keeps_the_stops_and_finds_six_metres_with_the_elbow_yaws_welded() {
         let (exp, physics, expert) = shipped(DAMP_FILE);
         assert!(physics.weld_elbow_yaws);
@@ -1680,6 +1663,7 @@ mod tests {
     /// gain, the roll-rate damper too) it walks clearly shorter. Measured
     /// over 40 trials from 777: 4.502 m with, 4.073 m without.
     #[test]
+    #[ignore = "long: a superseded 4 × 5 ms file's claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_damp_files_expert_walks_shorter_without_feedback() {
         let (_, physics, expert) = shipped(DAMP_FILE);
         the_expert_falls_or_walks_shorter_without_feedback(&expert, physics, (777, 40));
@@ -1839,22 +1823,12 @@ mod tests {
     /// (`scripts/stops.py`); the optimum s 1.00, 6.270 m of 6.083 m planned,
     /// 0.04° at worst.
     #[test]
+    #[ignore = "long: a superseded 4 × 5 ms file's claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_lean_file_keeps_the_stops_and_finds_six_metres_at_seed_4() {
         let (exp, physics, expert) = shipped(include_str!(
             "../../../experiments/physical-technical-arms-5ms-roll-aim-lean.toml"
         ));
-        keeps_the_stops_and_walks_six_metres(
-            &exp,
-            physics,
-            &expert,
-            &[
-                ("ThighRelHip2_Z", -0.0795884250812909),
-                ("ratio_flexion", 0.7915152326661048),
-                ("long_offset_MidAnkles_2_Torso_Init", 0.007432642764605207),
-                ("height_lift", 0.025574446778253247),
-                ("xlength_step_max", 0.10511595834344509),
-            ],
-        );
+        keeps_the_stops_and_walks_six_metres(&exp, physics, &expert, &LEAN_SEED4_OPTIM1);
     }
 
     /// Experiment 2 on the arms file at 4 × 5 ms finds a set that walks the
@@ -2768,20 +2742,10 @@ mod tests {
     /// optimum s 1.00, 6.352 m of 6.244 m planned, 0.05° at worst (the
     /// heading file's seed 1: 5.949 m at s 0.91).
     #[test]
+    #[ignore = "long: a superseded 4 × 5 ms file's claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_hold_file_keeps_the_stops_and_finds_six_metres_at_seed_1() {
         let (exp, physics, expert) = shipped(HOLD_FILE);
-        keeps_the_stops_and_walks_six_metres(
-            &exp,
-            physics,
-            &expert,
-            &[
-                ("ThighRelHip2_Z", -0.07810438860141834),
-                ("ratio_flexion", 0.8316249731504421),
-                ("long_offset_MidAnkles_2_Torso_Init", 0.014116291667796297),
-                ("height_lift", 0.027920855880542546),
-                ("xlength_step_max", 0.11600874473183519),
-            ],
-        );
+        keeps_the_stops_and_walks_six_metres(&exp, physics, &expert, &HOLD_SEED1_OPTIM1);
     }
 
     /// The hold file with each step read from the cycle before its
@@ -2813,6 +2777,128 @@ mod tests {
                 ("xlength_step_max", 0.14050995774255126),
             ],
         );
+    }
+
+    /// The before file's expert leans on its feedback: without it (every
+    /// gain, the roll-rate damper, the pitch hold and the step gauge too) it
+    /// walks clearly shorter. Measured over 40 trials from 777: 4.572 m with,
+    /// 4.073 m without, s 1.00 both.
+    #[test]
+    fn the_before_files_expert_walks_shorter_without_feedback() {
+        let (_, physics, expert) = shipped(BEFORE_FILE);
+        the_expert_falls_or_walks_shorter_without_feedback(&expert, physics, (777, 40));
+    }
+
+    /// Seed 1's Optim.1 of experiment 2 on the roll file (session 35's run).
+    const ROLL_SEED1_OPTIM1: [(&str, f64); 5] = [
+        ("ThighRelHip2_Z", -0.07248014550316677),
+        ("ratio_flexion", 0.7337248544360496),
+        ("long_offset_MidAnkles_2_Torso_Init", 0.007568212834695239),
+        ("height_lift", 0.027382255547773543),
+        ("xlength_step_max", 0.10655390587942211),
+    ];
+
+    /// Seed 1's Optim.1 of experiment 2 on the roll-aim file (session 36's run).
+    const ROLL_AIM_SEED1_OPTIM1: [(&str, f64); 5] = [
+        ("ThighRelHip2_Z", -0.07723586923111701),
+        ("ratio_flexion", 0.7913222324625083),
+        ("long_offset_MidAnkles_2_Torso_Init", 0.008266306443202406),
+        ("height_lift", 0.025000629956579354),
+        ("xlength_step_max", 0.10772545353299341),
+    ];
+
+    /// Seed 4's Optim.1 of experiment 2 on the lean file (session 52's run).
+    const LEAN_SEED4_OPTIM1: [(&str, f64); 5] = [
+        ("ThighRelHip2_Z", -0.0795884250812909),
+        ("ratio_flexion", 0.7915152326661048),
+        ("long_offset_MidAnkles_2_Torso_Init", 0.007432642764605207),
+        ("height_lift", 0.025574446778253247),
+        ("xlength_step_max", 0.10511595834344509),
+    ];
+
+    /// Seed 1's Optim.1 of experiment 2 on the hold file (session 59's run).
+    const HOLD_SEED1_OPTIM1: [(&str, f64); 5] = [
+        ("ThighRelHip2_Z", -0.07810438860141834),
+        ("ratio_flexion", 0.8316249731504421),
+        ("long_offset_MidAnkles_2_Torso_Init", 0.014116291667796297),
+        ("height_lift", 0.027920855880542546),
+        ("xlength_step_max", 0.11600874473183519),
+    ];
+
+    /// The superseded 4 × 5 ms files keep their bits: the roll, roll-aim,
+    /// lean, capped lean, damp and hold files, each a step on the way to the
+    /// before file. Their claims (six tests of the 6 m and the stops, 163
+    /// trials each, and two of the feedback; about 8 min of CPU in all) are
+    /// marked long and run only with `cargo test --workspace -- --ignored
+    /// nao::balance`; this pins one trial of each file's expert (seed 11)
+    /// and one of the Optim.1 its claim walks (seed 12), so a change to the
+    /// engine or the vendored rapier that moves one of those walks fails
+    /// here. When a pin moves on purpose, run the long claims again before
+    /// moving it. Read off `naofarm trial --experiment FILE --seed S
+    /// --trials 1 --json` at 6591aad, whose long claims passed in
+    /// clean-clone CI (at f84c244, with the same bits). The lean and capped
+    /// files' experts walk the same bits: the cap at the legs' reach does
+    /// not bind on the expert's 0.08 m steps.
+    #[test]
+    fn the_superseded_5ms_files_keep_their_bits() {
+        // (file, its claim's Optim.1, the expert's x and y, the Optim.1's)
+        type Pin<'a> = (&'a str, &'a [(&'a str, f64)], [f64; 2], [f64; 2]);
+        let pins: [Pin; 6] = [
+            (
+                include_str!("../../../experiments/physical-technical-arms-5ms-roll.toml"),
+                &ROLL_SEED1_OPTIM1,
+                [4.281322956085205, 0.20885001122951508],
+                [5.703700065612793, -0.06071317568421364],
+            ),
+            (
+                include_str!("../../../experiments/physical-technical-arms-5ms-roll-aim.toml"),
+                &ROLL_AIM_SEED1_OPTIM1,
+                [4.559727191925049, 0.17019248008728027],
+                [6.258851051330566, -0.45746731758117676],
+            ),
+            (
+                include_str!("../../../experiments/physical-technical-arms-5ms-roll-aim-lean.toml"),
+                &LEAN_SEED4_OPTIM1,
+                [4.2903361320495605, 0.04639783129096031],
+                [6.0312819480896, 0.35011887550354004],
+            ),
+            (
+                include_str!(
+                    "../../../experiments/physical-technical-arms-5ms-roll-aim-lean-reach.toml"
+                ),
+                &CAPPED_SEED3_OPTIM1,
+                [4.2903361320495605, 0.04639783129096031],
+                [6.201181888580322, -0.06047630310058594],
+            ),
+            (
+                DAMP_FILE,
+                &DAMP_SEED1_OPTIM1,
+                [4.469581604003906, 0.12153854966163635],
+                [6.417342662811279, -0.3300636112689972],
+            ),
+            (
+                HOLD_FILE,
+                &HOLD_SEED1_OPTIM1,
+                [4.637856960296631, -0.17280606925487518],
+                [6.426103591918945, -0.020636824890971184],
+            ),
+        ];
+        let bits = |t: &NaoTrial| [t.measurement.x_m.to_bits(), t.measurement.y_m.to_bits()];
+        for (file, optim1, expert_xy, optim1_xy) in pins {
+            let (exp, physics, expert) = shipped(file);
+            let optim1 = found_in(&exp, optim1);
+            for (set, params, seed, xy) in [
+                ("expert", &expert, 11, expert_xy),
+                ("Optim.1", &optim1, 12, optim1_xy),
+            ] {
+                let t = run(0, params, seed, 10.0, physics, closed()).unwrap();
+                println!(
+                    "{}, {set}: x {}, y {}",
+                    exp.name, t.measurement.x_m, t.measurement.y_m
+                );
+                assert_eq!(bits(&t), xy.map(f64::to_bits), "{}, {set}", exp.name);
+            }
+        }
     }
 
     /// Read in the touchdown's own cycle, when the other foot has often
