@@ -772,9 +772,7 @@ mod tests {
     #[test]
     #[ignore = "long: a superseded 4 × 5 ms file's claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_feedback_carries_the_arms_walk_at_5ms_with_the_wider_hip_roll() {
-        let (_, physics, expert) = shipped(include_str!(
-            "../../../experiments/physical-technical-arms-5ms-roll.toml"
-        ));
+        let (_, physics, expert) = shipped(ROLL_FILE);
         the_expert_falls_or_walks_shorter_without_feedback(&expert, physics, (777, 100));
     }
 
@@ -1314,9 +1312,7 @@ mod tests {
     #[test]
     #[ignore = "long: a superseded 4 × 5 ms file's claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_wider_hip_roll_at_5ms_keeps_the_stops_and_finds_six_metres_at_seed_1() {
-        let (exp, physics, expert) = shipped(include_str!(
-            "../../../experiments/physical-technical-arms-5ms-roll.toml"
-        ));
+        let (exp, physics, expert) = shipped(ROLL_FILE);
         assert_eq!(
             (physics.substeps, expert.given(Param::HipRollComp)),
             (4, Some(0.09))
@@ -1366,9 +1362,7 @@ mod tests {
     #[test]
     #[ignore = "long: a superseded 4 × 5 ms file's claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_aimed_roll_file_keeps_the_stops_and_finds_six_metres_at_seed_1() {
-        let (exp, physics, expert) = shipped(include_str!(
-            "../../../experiments/physical-technical-arms-5ms-roll-aim.toml"
-        ));
+        let (exp, physics, expert) = shipped(ROLL_AIM_FILE);
         assert_eq!(expert.given(Param::StepAim), Some(0.3));
         keeps_the_stops_and_walks_six_metres(&exp, physics, &expert, &ROLL_AIM_SEED1_OPTIM1);
     }
@@ -1383,9 +1377,7 @@ mod tests {
     /// the placing; 6.229 m, s 0.98, 0.93 × with it.
     #[test]
     fn a_torso_leaning_forward_steps_ahead_instead_of_back() {
-        let (exp, physics, expert) = shipped(include_str!(
-            "../../../experiments/physical-technical-arms-5ms-roll-aim-lean.toml"
-        ));
+        let (exp, physics, expert) = shipped(LEAN_FILE);
         assert_eq!(expert.given(Param::LeanPlace), Some(0.5));
         let placed = found_in(
             &exp,
@@ -1436,9 +1428,7 @@ mod tests {
     /// 4.03 m, with.
     #[test]
     fn steps_beyond_the_legs_reach_march_backward_and_the_cap_mends_them() {
-        let (_, physics, expert) = shipped(include_str!(
-            "../../../experiments/physical-technical-arms-5ms-roll-aim-lean.toml"
-        ));
+        let (_, physics, expert) = shipped(LEAN_FILE);
         let mut long = expert;
         long.set(Param::StepLength, 0.1338).unwrap();
         let batch = Batch {
@@ -1488,9 +1478,7 @@ mod tests {
     /// expert's 100 trials from 777 hash the same.
     #[test]
     fn a_stop_row_ahead_of_a_flung_joint_keeps_it_at_its_stop() {
-        let (exp, physics, expert) = shipped(include_str!(
-            "../../../experiments/physical-technical-arms-5ms-roll-aim-lean-reach.toml"
-        ));
+        let (exp, physics, expert) = shipped(CAPPED_FILE);
         assert_eq!(physics.firm_stop_lookahead, 1);
         assert_eq!(expert.given(Param::StepReach), Some(1.0));
         let window_alone = SimSettings {
@@ -1542,9 +1530,7 @@ mod tests {
     #[test]
     #[ignore = "long: a superseded 4 × 5 ms file's claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_capped_lean_file_keeps_the_stops_and_finds_six_metres_at_seed_3() {
-        let (exp, physics, expert) = shipped(include_str!(
-            "../../../experiments/physical-technical-arms-5ms-roll-aim-lean-reach.toml"
-        ));
+        let (exp, physics, expert) = shipped(CAPPED_FILE);
         keeps_the_stops_and_walks_six_metres(&exp, physics, &expert, &CAPPED_SEED3_OPTIM1);
     }
 
@@ -1557,9 +1543,7 @@ mod tests {
     /// here 30 trials: s 1.00 and 0.57.
     #[test]
     fn the_capped_lean_files_optimum_leans_on_its_elbow_yaws_swing() {
-        let (exp, physics, _) = shipped(include_str!(
-            "../../../experiments/physical-technical-arms-5ms-roll-aim-lean-reach.toml"
-        ));
+        let (exp, physics, _) = shipped(CAPPED_FILE);
         assert!(!physics.weld_elbow_yaws);
         let welded = SimSettings::with_physics(&protocol::Physics {
             weld_elbow_yaws: true,
@@ -1590,6 +1574,26 @@ mod tests {
         assert!(free >= 0.9, "free: s {free}");
         assert!(held <= 0.8, "welded: s {held}");
     }
+
+    /// The roll file: the arms walk at 4 × 5 ms with the stance hip's roll at
+    /// 0.09 rad (docs/walk.md, "The engine's constants at 4 × 5 ms").
+    const ROLL_FILE: &str =
+        include_str!("../../../experiments/physical-technical-arms-5ms-roll.toml");
+
+    /// The roll file with its steps aimed short by the legs' overreach
+    /// (docs/walk.md, "The roll file with its steps aimed").
+    const ROLL_AIM_FILE: &str =
+        include_str!("../../../experiments/physical-technical-arms-5ms-roll-aim.toml");
+
+    /// The roll-aim file with the feet placed against the forward lean
+    /// (docs/walk.md, "A torso leaning forward steps ahead").
+    const LEAN_FILE: &str =
+        include_str!("../../../experiments/physical-technical-arms-5ms-roll-aim-lean.toml");
+
+    /// The lean file with its steps capped at the legs' reach and a stop row
+    /// ahead of a flung joint (docs/walk.md, "A stop row ahead of a flung joint").
+    const CAPPED_FILE: &str =
+        include_str!("../../../experiments/physical-technical-arms-5ms-roll-aim-lean-reach.toml");
 
     /// The damp file: the capped lean file with the elbow yaws welded and
     /// the roll-rate damper (docs/walk.md, "The sideways rock, damped").
@@ -1825,9 +1829,7 @@ mod tests {
     #[test]
     #[ignore = "long: a superseded 4 × 5 ms file's claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_lean_file_keeps_the_stops_and_finds_six_metres_at_seed_4() {
-        let (exp, physics, expert) = shipped(include_str!(
-            "../../../experiments/physical-technical-arms-5ms-roll-aim-lean.toml"
-        ));
+        let (exp, physics, expert) = shipped(LEAN_FILE);
         keeps_the_stops_and_walks_six_metres(&exp, physics, &expert, &LEAN_SEED4_OPTIM1);
     }
 
@@ -2836,7 +2838,8 @@ mod tests {
     /// here. When a pin moves on purpose, run the long claims again before
     /// moving it. Read off `naofarm trial --experiment FILE --seed S
     /// --trials 1 --json` at 6591aad, whose long claims passed in
-    /// clean-clone CI (at f84c244, with the same bits). The lean and capped
+    /// clean-clone CI (at f84c244, with the same bits) and again with
+    /// `--ignored` at 177681b. The lean and capped
     /// files' experts walk the same bits: the cap at the legs' reach does
     /// not bind on the expert's 0.08 m steps.
     #[test]
@@ -2845,27 +2848,25 @@ mod tests {
         type Pin<'a> = (&'a str, &'a [(&'a str, f64)], [f64; 2], [f64; 2]);
         let pins: [Pin; 6] = [
             (
-                include_str!("../../../experiments/physical-technical-arms-5ms-roll.toml"),
+                ROLL_FILE,
                 &ROLL_SEED1_OPTIM1,
                 [4.281322956085205, 0.20885001122951508],
                 [5.703700065612793, -0.06071317568421364],
             ),
             (
-                include_str!("../../../experiments/physical-technical-arms-5ms-roll-aim.toml"),
+                ROLL_AIM_FILE,
                 &ROLL_AIM_SEED1_OPTIM1,
                 [4.559727191925049, 0.17019248008728027],
                 [6.258851051330566, -0.45746731758117676],
             ),
             (
-                include_str!("../../../experiments/physical-technical-arms-5ms-roll-aim-lean.toml"),
+                LEAN_FILE,
                 &LEAN_SEED4_OPTIM1,
                 [4.2903361320495605, 0.04639783129096031],
                 [6.0312819480896, 0.35011887550354004],
             ),
             (
-                include_str!(
-                    "../../../experiments/physical-technical-arms-5ms-roll-aim-lean-reach.toml"
-                ),
+                CAPPED_FILE,
                 &CAPPED_SEED3_OPTIM1,
                 [4.2903361320495605, 0.04639783129096031],
                 [6.201181888580322, -0.06047630310058594],
