@@ -748,6 +748,35 @@ mod tests {
         );
     }
 
+    /// The arms file at 4 × 5 ms (docs/walk.md, "Where the walks keep each
+    /// bound").
+    const ARMS_5MS_FILE: &str =
+        include_str!("../../../experiments/physical-technical-arms-5ms.toml");
+
+    /// The converged file: 10 × 2 ms steps, no double support.
+    const CONVERGED_FILE: &str =
+        include_str!("../../../experiments/physical-technical-converged.toml");
+
+    /// The converged file with the step period co-optimised.
+    const PERIOD_FILE: &str =
+        include_str!("../../../experiments/physical-technical-converged-period.toml");
+
+    /// The step period file at 1 ms physics steps.
+    const PERIOD_1MS_FILE: &str =
+        include_str!("../../../experiments/physical-technical-converged-period-1ms.toml");
+
+    /// The step period file with each trial's physics step drawn from a band.
+    const PERIOD_BAND_FILE: &str =
+        include_str!("../../../experiments/physical-technical-converged-period-band.toml");
+
+    /// Experiment 1 on the band with the steps aimed short.
+    const BAND_AIM_FILE: &str =
+        include_str!("../../../experiments/physical-converged-band-aim.toml");
+
+    /// Experiment 1 on the roll file with its steps aimed.
+    const EXP1_ROLL_AIM_FILE: &str =
+        include_str!("../../../experiments/physical-arms-5ms-roll-aim.toml");
+
     /// The feedback carries the arms walk at 4 × 5 ms, the file whose
     /// experiment 2 walks 6 m as planned (docs/walk.md, "Where the walks
     /// keep each bound"): without it the expert walks clearly shorter.
@@ -756,9 +785,7 @@ mod tests {
     /// and 5.667 → 5.28 m).
     #[test]
     fn the_feedback_carries_the_arms_walk_at_5ms() {
-        let (_, physics, expert) = shipped(include_str!(
-            "../../../experiments/physical-technical-arms-5ms.toml"
-        ));
+        let (_, physics, expert) = shipped(ARMS_5MS_FILE);
         the_expert_falls_or_walks_shorter_without_feedback(&expert, physics, (3, 20));
     }
 
@@ -786,9 +813,7 @@ mod tests {
     /// multibody's work.
     #[test]
     fn the_arms_walk_at_5ms_keeps_its_bits() {
-        let (_, physics, expert) = shipped(include_str!(
-            "../../../experiments/physical-technical-arms-5ms.toml"
-        ));
+        let (_, physics, expert) = shipped(ARMS_5MS_FILE);
         for (seed, x, y) in [
             (11, 4.458_668_231_964_111, 0.021_067_418_158_054_352),
             (12, 3.977_905_511_856_079, -0.289_411_365_985_870_36),
@@ -997,10 +1022,9 @@ mod tests {
     /// s 1.00), every joint within 1° of its stops on it and within 2° over
     /// the file's L (its 32 corners and centre; measured: 0.95° at worst).
     #[test]
+    #[ignore = "long: an older file's claim, pinned by the_older_files_claims_keep_their_bits (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_converged_experiment_walks_at_pace_within_the_stops() {
-        let (exp, physics, expert) = shipped(include_str!(
-            "../../../experiments/physical-technical-converged.toml"
-        ));
+        let (exp, physics, expert) = shipped(CONVERGED_FILE);
         let (_, s, mx, planned) = walks_at_pace_within_the_stops(&expert, 30, physics);
         let sets = corners_of_l(&exp, true);
         assert_eq!(sets.len(), 33);
@@ -1264,10 +1288,9 @@ mod tests {
     /// 4.631 m planned over 100 trials, within 0.02°; L 0.20° at worst;
     /// the optimum s 1.00, 5.358 m of 5.288 m planned (seeds 777–796).
     #[test]
+    #[ignore = "long: an older file's claim, pinned by the_older_files_claims_keep_their_bits (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_arms_experiment_at_5ms_walks_its_plan_and_keeps_its_stops() {
-        let (exp, physics, expert) = shipped(include_str!(
-            "../../../experiments/physical-technical-arms-5ms.toml"
-        ));
+        let (exp, physics, expert) = shipped(ARMS_5MS_FILE);
         assert_eq!(physics.substeps, 4);
         walks_at_pace_within_the_stops(&expert, 30, physics);
         let window = within_two_degrees_over(&corners_of_l(&exp, true), physics);
@@ -1320,6 +1343,10 @@ mod tests {
         keeps_the_stops_and_walks_six_metres(&exp, physics, &expert, &ROLL_SEED1_OPTIM1);
     }
 
+    /// Seed 1's Optim.1 of experiment 1 on the roll file with its steps
+    /// aimed (session 36's run).
+    const EXP1_ROLL_AIM_OPTIM1: [(&str, f64); 1] = [("ThighRelHip2_Z", -0.09917141208691056)];
+
     /// The roll file with its steps aimed short by the legs' overreach
     /// (`experiments/physical-arms-5ms-roll-aim.toml`; docs/walk.md, "The
     /// roll file with its steps aimed") walks experiment 1's optimum as
@@ -1329,10 +1356,9 @@ mod tests {
     /// more than 10 % beyond it. Measured: 4.873 m of 4.630 m planned (1.05
     /// ×) with the aim, 5.413 m (1.17 ×) without.
     #[test]
+    #[ignore = "long: an older file's claim, pinned by the_older_files_claims_keep_their_bits (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_aimed_roll_file_walks_experiment_ones_optimum_as_planned() {
-        let (exp, physics, expert) = shipped(include_str!(
-            "../../../experiments/physical-arms-5ms-roll-aim.toml"
-        ));
+        let (exp, physics, expert) = shipped(EXP1_ROLL_AIM_FILE);
         assert_eq!(
             (
                 expert.given(Param::StepAim),
@@ -1340,7 +1366,7 @@ mod tests {
             ),
             (Some(0.3), Some(0.09))
         );
-        let optim1 = found_in(&exp, &[("ThighRelHip2_Z", -0.09917141208691056)]);
+        let optim1 = found_in(&exp, &EXP1_ROLL_AIM_OPTIM1);
         let (_, s, mx, planned) = walks_at_pace_within_the_stops(&optim1, 40, physics);
         println!("aimed: s {s}, {mx:.3} m of {planned:.3} m");
         assert!(s >= 0.9, "s {s}");
@@ -1833,26 +1859,26 @@ mod tests {
         keeps_the_stops_and_walks_six_metres(&exp, physics, &expert, &LEAN_SEED4_OPTIM1);
     }
 
+    /// Seed 4's Optim.1 of experiment 2 on the arms file at 4 × 5 ms
+    /// (session 33's run).
+    const ARMS_5MS_SEED4_OPTIM1: [(&str, f64); 5] = [
+        ("ThighRelHip2_Z", -0.0783477250442469),
+        ("ratio_flexion", 0.7394565582757648),
+        ("long_offset_MidAnkles_2_Torso_Init", 0.00518644248710892),
+        ("height_lift", 0.025170063800778675),
+        ("xlength_step_max", 0.10477865722243142),
+    ];
+
     /// Experiment 2 on the arms file at 4 × 5 ms finds a set that walks the
     /// issue's 6 m as planned: seed 4's Optim.1 (session 33's run), 100
     /// trials from 777, s ≥ 0.9, ≥ 6.0 m, my/mx ≤ 0.25, within 10 % of its
     /// plan and 1° of every stop (measured: s 0.99, 6.028 m of 6.064 m
     /// planned, 0.09° at worst; docs/results.md).
     #[test]
+    #[ignore = "long: an older file's claim, pinned by the_older_files_claims_keep_their_bits (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_arms_at_5ms_find_a_set_that_walks_six_metres_as_planned() {
-        let (exp, physics, _) = shipped(include_str!(
-            "../../../experiments/physical-technical-arms-5ms.toml"
-        ));
-        let optim1 = found_in(
-            &exp,
-            &[
-                ("ThighRelHip2_Z", -0.0783477250442469),
-                ("ratio_flexion", 0.7394565582757648),
-                ("long_offset_MidAnkles_2_Torso_Init", 0.00518644248710892),
-                ("height_lift", 0.025170063800778675),
-                ("xlength_step_max", 0.10477865722243142),
-            ],
-        );
+        let (exp, physics, _) = shipped(ARMS_5MS_FILE);
+        let optim1 = found_in(&exp, &ARMS_5MS_SEED4_OPTIM1);
         let (_, s, mx, planned) = walks_at_pace_within_the_stops(&optim1, 100, physics);
         println!("seed 4's Optim.1: s {s}, {mx:.3} m of {planned:.3} m planned");
         assert!(s >= 0.9 && mx >= 6.0, "s {s}, {mx} m");
@@ -1869,9 +1895,7 @@ mod tests {
     /// landscape").
     #[test]
     fn the_walk_leans_on_the_ankle_pitch_speed_cap() {
-        let exp = experiment(include_str!(
-            "../../../experiments/physical-technical-converged.toml"
-        ));
+        let exp = experiment(CONVERGED_FILE);
         let capped = SimSettings::with_physics(&exp.physics);
         let expert = expert_of(&exp);
         let model = crate::nao::model::NaoModel::with_params(0, &expert).unwrap();
@@ -1946,9 +1970,7 @@ mod tests {
     /// test above), not sliding or lunging passed off as walking.
     #[test]
     fn a_deep_crouch_walks_past_its_plan_by_longer_steps_not_sliding() {
-        let exp = experiment(include_str!(
-            "../../../experiments/physical-technical-converged.toml"
-        ));
+        let exp = experiment(CONVERGED_FILE);
         let mut crouch = expert_of(&exp);
         crouch
             .set(protocol::params::Param::ThighRelHip2Z, -0.08)
@@ -2122,10 +2144,9 @@ mod tests {
     /// torso's x axis computed apart. Measured (seeds 777–780): −3.2°,
     /// −15.6° and +0.2°; 5.52, 4.88 and 5.38 m.
     #[test]
+    #[ignore = "long: an older file's claim, pinned by the_older_files_claims_keep_their_bits (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_fast_walk_leans_back_at_2ms_and_walks_shorter() {
-        let (_, physics, expert) = shipped(include_str!(
-            "../../../experiments/physical-technical-arms-5ms.toml"
-        ));
+        let (_, physics, expert) = shipped(ARMS_5MS_FILE);
         let optim = with_values(expert, &ARMS_5MS_OPTIM1);
         let at = |substeps: u32| {
             let physics = SimSettings {
@@ -2176,6 +2197,19 @@ mod tests {
         );
     }
 
+    /// The 1 ms step period file's experiment 2 Optim.1 (iteration 455).
+    const PERIOD_1MS_OPTIM1: [(&str, f64); 6] = [
+        ("ThighRelHip2_Z", -0.079_283_857_342_304_61),
+        ("ratio_flexion", 0.775_170_556_307_798_7),
+        (
+            "long_offset_MidAnkles_2_Torso_Init",
+            0.010_299_657_659_159_53,
+        ),
+        ("height_lift", 0.036_489_608_738_238_64),
+        ("xlength_step_max", 0.127_474_929_742_425_77),
+        ("step_period", 0.152_911_190_106_561_3),
+    ];
+
     /// CLOP optimises into the time step (docs/walk.md): the best set of
     /// experiment 2 with the step period at 1 ms physics steps
     /// (`experiments/physical-technical-converged-period-1ms.toml`, Optim.1
@@ -2184,24 +2218,12 @@ mod tests {
     /// less at 0.67 ms, all else as the file has it. Measured (20 trials
     /// from seed 777): 6.451, 4.331 and 5.786 m, s 1.00 at each.
     #[test]
+    #[ignore = "long: an older file's claim, pinned by the_older_files_claims_keep_their_bits (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_one_millisecond_optimum_is_fitted_to_its_step() {
-        let exp = experiment(include_str!(
-            "../../../experiments/physical-technical-converged-period-1ms.toml"
-        ));
+        let exp = experiment(PERIOD_1MS_FILE);
         let physics = SimSettings::with_physics(&exp.physics);
         assert_eq!(physics.substeps, 20);
-        let found = [
-            ("ThighRelHip2_Z", -0.079_283_857_342_304_61),
-            ("ratio_flexion", 0.775_170_556_307_798_7),
-            (
-                "long_offset_MidAnkles_2_Torso_Init",
-                0.010_299_657_659_159_53,
-            ),
-            ("height_lift", 0.036_489_608_738_238_64),
-            ("xlength_step_max", 0.127_474_929_742_425_77),
-            ("step_period", 0.152_911_190_106_561_3),
-        ];
-        let optim = found_in(&exp, &found);
+        let optim = found_in(&exp, &PERIOD_1MS_OPTIM1);
         let at = |substeps: u32| {
             twenty_from_777(
                 &optim,
@@ -2223,6 +2245,19 @@ mod tests {
         assert!(fine < 0.95 * own, "{fine} against {own}");
     }
 
+    /// The band file's experiment 2 Optim.1 (iteration 448 of its first run).
+    const PERIOD_BAND_OPTIM1: [(&str, f64); 6] = [
+        ("ThighRelHip2_Z", -0.078_718_203_732_988_52),
+        ("ratio_flexion", 0.722_955_009_324_876),
+        (
+            "long_offset_MidAnkles_2_Torso_Init",
+            0.009_011_403_136_531_496,
+        ),
+        ("height_lift", 0.030_823_244_004_163_065),
+        ("xlength_step_max", 0.082_196_565_978_954_21),
+        ("step_period", 0.132_082_156_487_145_4),
+    ];
+
     /// A band of physics steps keeps CLOP from fitting its optimum to one:
     /// the best set experiment 2 with the step period found with each
     /// trial's step drawn from 1.25 to 0.67 ms
@@ -2233,24 +2268,12 @@ mod tests {
     /// by stepping. Measured (100 trials from seed 777): 6.235, 6.396 and
     /// 6.321 m at 1.25, 1 and 0.67 ms, s 1.00, torso −1.5° to −0.5°.
     #[test]
+    #[ignore = "long: an older file's claim, pinned by the_older_files_claims_keep_their_bits (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_band_optimum_walks_six_metres_at_every_step_of_its_band() {
-        let exp = experiment(include_str!(
-            "../../../experiments/physical-technical-converged-period-band.toml"
-        ));
+        let exp = experiment(PERIOD_BAND_FILE);
         let physics = SimSettings::with_physics(&exp.physics);
         assert_eq!((physics.substeps, physics.substeps_max), (16, 30));
-        let found = [
-            ("ThighRelHip2_Z", -0.078_718_203_732_988_52),
-            ("ratio_flexion", 0.722_955_009_324_876),
-            (
-                "long_offset_MidAnkles_2_Torso_Init",
-                0.009_011_403_136_531_496,
-            ),
-            ("height_lift", 0.030_823_244_004_163_065),
-            ("xlength_step_max", 0.082_196_565_978_954_21),
-            ("step_period", 0.132_082_156_487_145_4),
-        ];
-        let optim = found_in(&exp, &found);
+        let optim = found_in(&exp, &PERIOD_BAND_OPTIM1);
         for substeps in [16, 20, 30] {
             let fixed = SimSettings {
                 substeps,
@@ -2329,8 +2352,7 @@ mod tests {
     /// test at 014eb9b, where the long claims passed in clean-clone CI.
     #[test]
     fn the_band_files_keep_their_bits() {
-        let band =
-            include_str!("../../../experiments/physical-technical-converged-period-band.toml");
+        let band = PERIOD_BAND_FILE;
         let reach = include_str!(
             "../../../experiments/physical-technical-converged-period-band-reach.toml"
         );
@@ -2417,9 +2439,7 @@ mod tests {
     #[test]
     #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_band_expert_walks_four_metres_within_its_stops() {
-        let (exp, physics, expert) = shipped(include_str!(
-            "../../../experiments/physical-technical-converged-period-band.toml"
-        ));
+        let (exp, physics, expert) = shipped(PERIOD_BAND_FILE);
         assert_eq!((physics.substeps, physics.substeps_max), (16, 30));
         assert_eq!(
             expert.given(protocol::params::Param::StepPeriod),
@@ -2487,9 +2507,7 @@ mod tests {
     #[test]
     #[ignore = "long: a band file's 100-trial claim (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_band_runs_optimum_walks_six_metres_but_steps_short_of_its_plan() {
-        let (exp, physics, _) = shipped(include_str!(
-            "../../../experiments/physical-technical-converged-period-band.toml"
-        ));
+        let (exp, physics, _) = shipped(PERIOD_BAND_FILE);
         let optim = found_in(&exp, &BAND_OPTIM);
         let (s, mx, my) = summary(&from_777(&optim, 100, physics));
         let planned = trial::planned_travel_m(0, &optim, 10.0, closed()).unwrap();
@@ -2642,10 +2660,9 @@ mod tests {
     /// expert) 4.076 m; without the aim −0.10 walks 4.541 m, past its plan,
     /// so there the deep crouch still wins over most of the range.
     #[test]
+    #[ignore = "long: an older file's claim, pinned by the_older_files_claims_keep_their_bits (`cargo test --workspace -- --ignored nao::balance`)"]
     fn experiment_ones_thigh_has_an_interior_optimum_with_the_aim() {
-        let (_, physics, expert) = shipped(include_str!(
-            "../../../experiments/physical-converged-band-aim.toml"
-        ));
+        let (_, physics, expert) = shipped(BAND_AIM_FILE);
         assert_eq!(expert.given(Param::StepAim), Some(0.3));
         let thigh = |v: f64| with_values(expert, &[("ThighRelHip2_Z", v)]);
         let walk = |p: &ParamValues| {
@@ -2675,6 +2692,19 @@ mod tests {
         );
     }
 
+    /// The step period file's experiment 2 Optim.1 (iteration 369).
+    const PERIOD_OPTIM1: [(&str, f64); 6] = [
+        ("ThighRelHip2_Z", -0.078_619_611_717_998_87),
+        ("ratio_flexion", 0.674_939_194_536_835),
+        (
+            "long_offset_MidAnkles_2_Torso_Init",
+            0.027_151_363_412_487_813,
+        ),
+        ("height_lift", 0.063_689_905_311_591_98),
+        ("xlength_step_max", 0.085_220_683_185_753_74),
+        ("step_period", 0.122_157_409_483_154_03),
+    ];
+
     /// The pace issue's 6.0 m, reached on converged physics with the step
     /// period co-optimised (`experiments/physical-technical-converged-period.toml`):
     /// the best set its 500 iterations found (Optim.1, iteration 369, as
@@ -2684,23 +2714,11 @@ mod tests {
     /// (measured: 0.80°). The file's expert set keeps the engine's own step
     /// period, so its walk is the five-parameter file's.
     #[test]
+    #[ignore = "long: an older file's claim, pinned by the_older_files_claims_keep_their_bits (`cargo test --workspace -- --ignored nao::balance`)"]
     fn the_step_period_experiments_best_set_walks_six_metres_within_the_stops() {
-        let exp = experiment(include_str!(
-            "../../../experiments/physical-technical-converged-period.toml"
-        ));
+        let exp = experiment(PERIOD_FILE);
         let physics = SimSettings::with_physics(&exp.physics);
-        let found = [
-            ("ThighRelHip2_Z", -0.078_619_611_717_998_87),
-            ("ratio_flexion", 0.674_939_194_536_835),
-            (
-                "long_offset_MidAnkles_2_Torso_Init",
-                0.027_151_363_412_487_813,
-            ),
-            ("height_lift", 0.063_689_905_311_591_98),
-            ("xlength_step_max", 0.085_220_683_185_753_74),
-            ("step_period", 0.122_157_409_483_154_03),
-        ];
-        let optim = found_in(&exp, &found);
+        let optim = found_in(&exp, &PERIOD_OPTIM1);
         let (ts, s, mx, planned) = walks_at_pace_as_planned(&optim, 100, physics);
         assert!(s >= 0.9, "s = {s}");
         assert!(mx >= 6.0, "mx = {mx}");
@@ -2710,9 +2728,7 @@ mod tests {
             }
         }
         let expert = expert_of(&exp);
-        let five = experiment(include_str!(
-            "../../../experiments/physical-technical-converged.toml"
-        ));
+        let five = experiment(CONVERGED_FILE);
         let five = ParamValues::from_named(&five.full_params(&five.expert_values())).unwrap();
         let one = |p: &ParamValues| run(0, p, 777, 10.0, physics, closed()).unwrap();
         assert_eq!(one(&expert), one(&five), "the expert set's walk");
@@ -2900,6 +2916,157 @@ mod tests {
                 assert_eq!(bits(&t), xy.map(f64::to_bits), "{}, {set}", exp.name);
             }
         }
+    }
+
+    /// The older files' claims, marked long, keep their bits: one trial of
+    /// each set those claims walk, on the physics they walk it on, checked
+    /// to the bit (the claims' own trials are the same function of the same
+    /// inputs). The claims: experiment 1's interior optimum with the aim,
+    /// the band, 1 ms and step period optima, the arms file's at 4 × 5 ms
+    /// (seed 4's Optim.1, session 23's optimum, seed 2's Optim.1 at 2 ms)
+    /// and experiment 1's optimum on the roll-aim file, aimed and not, and
+    /// the converged file's expert. The values were read off this test's
+    /// own print at 113c641, where every one of those claims passed
+    /// (session 61's `--ignored` run and its CI).
+    #[test]
+    fn the_older_files_claims_keep_their_bits() {
+        // (file, the set's values over the file's expert, the physics
+        // steps per cycle, fixed (0: the file's own), the seed, x and y)
+        type Pin<'a> = (&'a str, &'a [(&'a str, f64)], u32, u64, [f64; 2]);
+        let deep_unaimed = [("ThighRelHip2_Z", -0.10), ("step_aim", 0.0)];
+        let unaimed = [EXP1_ROLL_AIM_OPTIM1[0], ("step_aim", 0.0)];
+        let pins: [Pin; 14] = [
+            (
+                BAND_AIM_FILE,
+                &[],
+                0,
+                11,
+                [4.219828128814697, 0.4014723598957062],
+            ),
+            (
+                BAND_AIM_FILE,
+                &[("ThighRelHip2_Z", -0.075)],
+                0,
+                12,
+                [4.646162033081055, -0.1609996259212494],
+            ),
+            (
+                BAND_AIM_FILE,
+                &deep_unaimed,
+                0,
+                12,
+                [3.729851484298706, -0.0012005593162029982],
+            ),
+            (
+                PERIOD_BAND_FILE,
+                &PERIOD_BAND_OPTIM1,
+                16,
+                12,
+                [5.943450927734375, -0.6294988989830017],
+            ),
+            (
+                PERIOD_BAND_FILE,
+                &PERIOD_BAND_OPTIM1,
+                30,
+                12,
+                [5.4790940284729, -0.4165811836719513],
+            ),
+            (
+                PERIOD_1MS_FILE,
+                &PERIOD_1MS_OPTIM1,
+                0,
+                12,
+                [5.755347728729248, -0.7034714818000793],
+            ),
+            (
+                PERIOD_1MS_FILE,
+                &PERIOD_1MS_OPTIM1,
+                16,
+                12,
+                [4.268350124359131, -0.7147274017333984],
+            ),
+            (
+                PERIOD_FILE,
+                &PERIOD_OPTIM1,
+                0,
+                12,
+                [5.8168253898620605, -0.18462815880775452],
+            ),
+            (
+                ARMS_5MS_FILE,
+                &ARMS_5MS_SEED4_OPTIM1,
+                0,
+                12,
+                [5.995064735412598, -0.27393221855163574],
+            ),
+            (
+                ARMS_5MS_FILE,
+                &ARMS_OPTIM2,
+                0,
+                12,
+                [5.445354461669922, -0.1392078995704651],
+            ),
+            (
+                ARMS_5MS_FILE,
+                &ARMS_5MS_OPTIM1,
+                10,
+                12,
+                [4.924708843231201, -0.1302572339773178],
+            ),
+            (
+                EXP1_ROLL_AIM_FILE,
+                &EXP1_ROLL_AIM_OPTIM1,
+                0,
+                12,
+                [4.909170627593994, 0.31926780939102173],
+            ),
+            (
+                EXP1_ROLL_AIM_FILE,
+                &unaimed,
+                0,
+                12,
+                [5.282294750213623, -0.00655552139505744],
+            ),
+            (
+                CONVERGED_FILE,
+                &[],
+                0,
+                11,
+                [4.291441440582275, -0.02505970187485218],
+            ),
+        ];
+        let mut moved = Vec::new();
+        for (file, values, substeps, seed, xy) in pins {
+            let (exp, physics, expert) = shipped(file);
+            let set = with_values(expert, values);
+            let names = exp.parameter.iter().map(|p| p.name.as_str());
+            if names.eq(values.iter().map(|(n, _)| *n)) {
+                assert_eq!(
+                    set,
+                    found_in(&exp, values),
+                    "{}: as a worker gets it",
+                    exp.name
+                );
+            }
+            let physics = match substeps {
+                0 => physics,
+                n => SimSettings {
+                    substeps: n,
+                    substeps_max: 0,
+                    ..physics
+                },
+            };
+            let t = run(0, &set, seed, 10.0, physics, closed()).unwrap();
+            let (x, y) = (t.measurement.x_m, t.measurement.y_m);
+            println!(
+                "{}, {values:?} at {substeps}, seed {seed}: [{x:?}, {y:?}]",
+                exp.name
+            );
+            if [x.to_bits(), y.to_bits()] != xy.map(f64::to_bits) {
+                moved.push((exp.name, values, substeps, x, y));
+            }
+        }
+        assert!(moved.is_empty(), "moved: {moved:?}");
     }
 
     /// Read in the touchdown's own cycle, when the other foot has often
