@@ -2843,6 +2843,49 @@ mod tests {
         ("xlength_step_max", 0.11600874473183519),
     ];
 
+    /// A trial pinned to the bit: the file, the set's values over the
+    /// file's expert (none: the expert), the physics steps per cycle, fixed
+    /// (0: the file's own), the seed, and the trial's x and y.
+    type BitPin<'a> = (&'a str, &'a [(&'a str, f64)], u32, u64, [f64; 2]);
+
+    /// Runs every pinned trial on the closed loop and fails naming each one
+    /// whose x or y moved by a bit. A set naming every parameter of its file
+    /// is checked to be the one a worker gets.
+    fn pins_hold(pins: &[BitPin]) {
+        let mut moved = Vec::new();
+        for &(file, values, substeps, seed, xy) in pins {
+            let (exp, physics, expert) = shipped(file);
+            let set = with_values(expert, values);
+            let names = exp.parameter.iter().map(|p| p.name.as_str());
+            if names.eq(values.iter().map(|(n, _)| *n)) {
+                assert_eq!(
+                    set,
+                    found_in(&exp, values),
+                    "{}: as a worker gets it",
+                    exp.name
+                );
+            }
+            let physics = match substeps {
+                0 => physics,
+                n => SimSettings {
+                    substeps: n,
+                    substeps_max: 0,
+                    ..physics
+                },
+            };
+            let t = run(0, &set, seed, 10.0, physics, closed()).unwrap();
+            let (x, y) = (t.measurement.x_m, t.measurement.y_m);
+            println!(
+                "{}, {values:?} at {substeps}, seed {seed}: [{x:?}, {y:?}]",
+                exp.name
+            );
+            if [x.to_bits(), y.to_bits()] != xy.map(f64::to_bits) {
+                moved.push((exp.name, values, substeps, seed, x, y));
+            }
+        }
+        assert!(moved.is_empty(), "moved: {moved:?}");
+    }
+
     /// The superseded 4 × 5 ms files keep their bits: the roll, roll-aim,
     /// lean, capped lean, damp and hold files, each a step on the way to the
     /// before file. Their claims (six tests of the 6 m and the stops, 163
@@ -2860,62 +2903,93 @@ mod tests {
     /// not bind on the expert's 0.08 m steps.
     #[test]
     fn the_superseded_5ms_files_keep_their_bits() {
-        // (file, its claim's Optim.1, the expert's x and y, the Optim.1's)
-        type Pin<'a> = (&'a str, &'a [(&'a str, f64)], [f64; 2], [f64; 2]);
-        let pins: [Pin; 6] = [
+        // each file's expert at seed 11, its claim's Optim.1 at seed 12
+        pins_hold(&[
+            (
+                ROLL_FILE,
+                &[],
+                0,
+                11,
+                [4.281322956085205, 0.20885001122951508],
+            ),
             (
                 ROLL_FILE,
                 &ROLL_SEED1_OPTIM1,
-                [4.281322956085205, 0.20885001122951508],
+                0,
+                12,
                 [5.703700065612793, -0.06071317568421364],
             ),
             (
                 ROLL_AIM_FILE,
-                &ROLL_AIM_SEED1_OPTIM1,
+                &[],
+                0,
+                11,
                 [4.559727191925049, 0.17019248008728027],
+            ),
+            (
+                ROLL_AIM_FILE,
+                &ROLL_AIM_SEED1_OPTIM1,
+                0,
+                12,
                 [6.258851051330566, -0.45746731758117676],
             ),
             (
                 LEAN_FILE,
-                &LEAN_SEED4_OPTIM1,
+                &[],
+                0,
+                11,
                 [4.2903361320495605, 0.04639783129096031],
+            ),
+            (
+                LEAN_FILE,
+                &LEAN_SEED4_OPTIM1,
+                0,
+                12,
                 [6.0312819480896, 0.35011887550354004],
             ),
             (
                 CAPPED_FILE,
-                &CAPPED_SEED3_OPTIM1,
+                &[],
+                0,
+                11,
                 [4.2903361320495605, 0.04639783129096031],
+            ),
+            (
+                CAPPED_FILE,
+                &CAPPED_SEED3_OPTIM1,
+                0,
+                12,
                 [6.201181888580322, -0.06047630310058594],
             ),
             (
                 DAMP_FILE,
-                &DAMP_SEED1_OPTIM1,
+                &[],
+                0,
+                11,
                 [4.469581604003906, 0.12153854966163635],
+            ),
+            (
+                DAMP_FILE,
+                &DAMP_SEED1_OPTIM1,
+                0,
+                12,
                 [6.417342662811279, -0.3300636112689972],
             ),
             (
                 HOLD_FILE,
-                &HOLD_SEED1_OPTIM1,
+                &[],
+                0,
+                11,
                 [4.637856960296631, -0.17280606925487518],
+            ),
+            (
+                HOLD_FILE,
+                &HOLD_SEED1_OPTIM1,
+                0,
+                12,
                 [6.426103591918945, -0.020636824890971184],
             ),
-        ];
-        let bits = |t: &NaoTrial| [t.measurement.x_m.to_bits(), t.measurement.y_m.to_bits()];
-        for (file, optim1, expert_xy, optim1_xy) in pins {
-            let (exp, physics, expert) = shipped(file);
-            let optim1 = found_in(&exp, optim1);
-            for (set, params, seed, xy) in [
-                ("expert", &expert, 11, expert_xy),
-                ("Optim.1", &optim1, 12, optim1_xy),
-            ] {
-                let t = run(0, params, seed, 10.0, physics, closed()).unwrap();
-                println!(
-                    "{}, {set}: x {}, y {}",
-                    exp.name, t.measurement.x_m, t.measurement.y_m
-                );
-                assert_eq!(bits(&t), xy.map(f64::to_bits), "{}, {set}", exp.name);
-            }
-        }
+        ]);
     }
 
     /// The older files' claims, marked long, keep their bits: one trial of
@@ -2930,12 +3004,9 @@ mod tests {
     /// (session 61's `--ignored` run and its CI).
     #[test]
     fn the_older_files_claims_keep_their_bits() {
-        // (file, the set's values over the file's expert, the physics
-        // steps per cycle, fixed (0: the file's own), the seed, x and y)
-        type Pin<'a> = (&'a str, &'a [(&'a str, f64)], u32, u64, [f64; 2]);
         let deep_unaimed = [("ThighRelHip2_Z", -0.10), ("step_aim", 0.0)];
         let unaimed = [EXP1_ROLL_AIM_OPTIM1[0], ("step_aim", 0.0)];
-        let pins: [Pin; 14] = [
+        pins_hold(&[
             (
                 BAND_AIM_FILE,
                 &[],
@@ -3034,39 +3105,7 @@ mod tests {
                 11,
                 [4.291441440582275, -0.02505970187485218],
             ),
-        ];
-        let mut moved = Vec::new();
-        for (file, values, substeps, seed, xy) in pins {
-            let (exp, physics, expert) = shipped(file);
-            let set = with_values(expert, values);
-            let names = exp.parameter.iter().map(|p| p.name.as_str());
-            if names.eq(values.iter().map(|(n, _)| *n)) {
-                assert_eq!(
-                    set,
-                    found_in(&exp, values),
-                    "{}: as a worker gets it",
-                    exp.name
-                );
-            }
-            let physics = match substeps {
-                0 => physics,
-                n => SimSettings {
-                    substeps: n,
-                    substeps_max: 0,
-                    ..physics
-                },
-            };
-            let t = run(0, &set, seed, 10.0, physics, closed()).unwrap();
-            let (x, y) = (t.measurement.x_m, t.measurement.y_m);
-            println!(
-                "{}, {values:?} at {substeps}, seed {seed}: [{x:?}, {y:?}]",
-                exp.name
-            );
-            if [x.to_bits(), y.to_bits()] != xy.map(f64::to_bits) {
-                moved.push((exp.name, values, substeps, x, y));
-            }
-        }
-        assert!(moved.is_empty(), "moved: {moved:?}");
+        ]);
     }
 
     /// Read in the touchdown's own cycle, when the other foot has often
