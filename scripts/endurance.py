@@ -10,9 +10,8 @@ stood, the torso's mean pitch over them, and the median time of the falls.
     scripts/endurance.py [--bin target/release/naofarm] [--trials 40]
                          [--durations 10,20,30] "label|naofarm trial args" ...
 
-e.g. "heading expert|--experiment experiments/physical-technical-arms-5ms-roll-aim-lean-reach-damp-heading.toml".
-Trials start at seed 777 (Table IV's) on 2 threads. docs/walk.md, "How long
-the walks last", has the measurements.
+e.g. "expert|--experiment experiments/physical-technical.toml".
+Trials start at seed 777 (Table IV's) on 2 threads.
 """
 import argparse
 import json

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """How a recorded trial's leg joints track their targets, and where its steps
-land (docs/walk.md, "The firm file's limits, and the distance's time step").
+land.
 
 Reads replay files written by `naofarm trial --record FILE` (their `angles`,
 `targets` and `load`) and prints, per file, a Markdown row per joint of the
@@ -11,7 +11,7 @@ the header's `planted_n`, footwork's PLANTED_N, after the other foot's
 landing), their median,
 and the torso's advance; then the turn: the torso's yaw about the vertical
 (its range and rms about its mean) and each stance foot's mean roll and
-pitch while it alone carries the robot (docs/walk.md, "The torso's yaw").
+pitch while it alone carries the robot.
 
     naofarm trial --experiment experiments/physical-technical.toml \\
         --trials 1 --seed 777 --substeps 2 --record /tmp/r2.jsonl

@@ -423,76 +423,32 @@ pub struct TrialArgs {
     /// League robot type 0–4 (default 0, or the experiment's).
     #[arg(long = "type")]
     pub robot_type: Option<u8>,
-    /// Walk engine: `open-loop` or `closed-loop` (default `open-loop`, or the
-    /// experiment's).
-    #[arg(long)]
-    pub walk: Option<String>,
     /// Start from an experiment file, or from a run directory (the experiment
-    /// as the run journaled it): its walk, robot type, trial duration,
+    /// as the run journaled it): its robot type, trial duration,
     /// physics, and its expert set (or --set's) with its fixed values. Every
     /// other flag overrides it (`--param` one value).
     #[arg(long, value_name = "FILE|RUN_DIR", conflicts_with = "run_dir")]
     pub experiment: Option<std::path::PathBuf>,
-    /// Set one of the walk engine's constants (KEY=VALUE, repeatable): to
-    /// measure them (docs/walk.md); farm trials always use the engine's own.
-    #[arg(long, value_name = "KEY=VALUE", hide = true)]
-    pub engine: Vec<String>,
-    /// Move one of the robot's physical limits (KEY=VALUE, repeatable:
-    /// `speed_cap_scale`, `speed_cap_joints` (name suffixes, comma-separated:
-    /// the joints the scale applies to), `max_torque_nm`, `contact_hz`,
-    /// `contact_prediction_m`, `friction_scale`: the trial's drawn ground
-    /// friction times this, `weld_arm_rest=1`: swinging arms move at the
-    /// shoulder pitches only, `friction_in_bias_pass=1`: rapier solves
-    /// friction in each step's biased pass too): to measure which limit stops a walk
-    /// (docs/walk.md); farm trials always use the league's.
-    #[arg(long, value_name = "KEY=VALUE", hide = true)]
-    pub limit: Vec<String>,
+    /// Play the walk's plan without its feedback (no balance, no step
+    /// gauge): to measure what the feedback carries; farm trials always
+    /// use it.
+    #[arg(long, hide = true)]
+    pub no_feedback: bool,
     /// Trial duration, simulated seconds (default 10, or the experiment's).
     #[arg(long)]
     pub duration: Option<f64>,
     /// Threads (default: cores).
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Physics sub-steps per 20 ms cycle, 1–50 (default 2, or the
-    /// experiment's; see `bench sim`).
+    /// Physics steps per 20 ms cycle, 1–50 (default 4, or the experiment's).
     #[arg(long)]
     pub substeps: Option<u32>,
-    /// Draw each trial's physics steps per cycle from --substeps..=this by
-    /// its seed (`[physics] substeps_max`; 0: none). Default: the
-    /// experiment's band, unless --substeps is given (a fixed step).
-    #[arg(long)]
-    pub substeps_max: Option<u32>,
-    /// Rapier solver iterations per sub-step, 1–16 (default 1).
+    /// Rapier solver iterations per physics step, 1–16 (default 1).
     #[arg(long)]
     pub solver_iterations: Option<u32>,
-    /// Rapier PGS iterations per solver iteration, 1–200 (default 12).
+    /// Rapier PGS iterations per solver iteration, 1–200 (default 28).
     #[arg(long)]
     pub pgs_iterations: Option<u32>,
-    /// Reflected rotor inertia of every motorised hinge, kg·m², 0–0.1
-    /// (default 0: the league's robot has none).
-    #[arg(long)]
-    pub armature: Option<f64>,
-    /// Natural frequency of the feet's ground contact, Hz, 10–10000
-    /// (default 500, or the experiment's).
-    #[arg(long)]
-    pub contact_hz: Option<f64>,
-    /// Joint stops that hold within a physics step (`[physics] firm_stops`):
-    /// `true` or `false` (default false, or the experiment's).
-    #[arg(long)]
-    pub firm_stops: Option<bool>,
-    /// With firm stops, how near a stop a joint gets its limit row, degrees,
-    /// 1–20 (`[physics] firm_stop_window_deg`; default 3, or the experiment's).
-    #[arg(long)]
-    pub firm_stop_window_deg: Option<f64>,
-    /// With firm stops, a joint also gets its limit row when its speed would
-    /// carry it into the window within this many physics steps, 0–10
-    /// (`[physics] firm_stop_lookahead`; default 0, or the experiment's).
-    #[arg(long)]
-    pub firm_stop_lookahead: Option<u32>,
-    /// Weld the elbow yaws at 0° (`[physics] weld_elbow_yaws`; `true` or
-    /// `false`, default false, or the experiment's).
-    #[arg(long)]
-    pub weld_elbow_yaws: Option<bool>,
     /// Record the first trial (seed --seed; with --run, the farm trial):
     /// every body's pose each 20 ms cycle, as JSON lines, for a replay.
     #[arg(long, value_name = "FILE")]
@@ -509,8 +465,7 @@ pub struct TrialArgs {
         value_name = "DIR",
         requires_all = ["iteration", "trial"],
         conflicts_with_all = ["params", "trials", "seed", "robot_type", "duration", "substeps",
-            "solver_iterations", "pgs_iterations", "armature", "contact_hz", "firm_stops",
-            "firm_stop_window_deg", "firm_stop_lookahead", "weld_elbow_yaws", "substeps_max"]
+            "solver_iterations", "pgs_iterations", "no_feedback"]
     )]
     pub run_dir: Option<std::path::PathBuf>,
     /// With --run: the iteration.

@@ -122,33 +122,6 @@ pub fn type_overrides(e: &Experiment, robot_type: u8) -> Vec<(String, String)> {
         .collect()
 }
 
-/// A closed-loop walk of robot type `robot_type` on `physics` that the
-/// engine cannot carry: a type with toes on physics where they bounce
-/// (`worker::nao::sim::toes_bounce`). A line that says so and what to use,
-/// or none.
-#[must_use]
-pub fn toe_note(
-    robot_type: u8,
-    walk: protocol::experiment::WalkEngine,
-    physics: &protocol::Physics,
-) -> Option<String> {
-    use worker::nao::model::Morphology;
-    let toes = Morphology::of_type(robot_type).is_ok_and(|m| m.use_toe);
-    (toes
-        && walk == protocol::experiment::WalkEngine::ClosedLoop
-        && worker::nao::sim::toes_bounce(physics))
-    .then(|| {
-        format!(
-            "robot type {robot_type}'s toes on {} ms steps, a {} Hz ground and no firm \
-             stops: its feet bounce and the expert set falls in most trials (docs/walk.md, \
-             \"The league's five types\"); use the firm file's physics (firm_stops = true, \
-             contact_hz = 60) or finer steps (substeps = 4 or more)",
-            physics.step_ms(),
-            physics.contact_hz
-        )
-    })
-}
-
 pub fn parse_params(params: &[String]) -> Result<Vec<(String, f64)>, Failure> {
     params
         .iter()

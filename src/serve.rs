@@ -145,9 +145,6 @@ pub fn prepare_run(job: &JobArgs) -> Result<Prepared, Failure> {
         for (_, note) in crate::common::type_overrides(&exp, exp.robot_type) {
             eprintln!("note: {note}");
         }
-        if let Some(note) = crate::common::toe_note(exp.robot_type, exp.walk, &exp.physics) {
-            eprintln!("note: {note}");
-        }
     }
     if !(job.silence_s.is_finite() && (0.1..=3600.0).contains(&job.silence_s)) {
         return Err(Failure::Usage(anyhow!(
@@ -326,7 +323,7 @@ pub fn summary(
                     "failures": c.failures,
                     "set_aside": c.set_aside,
                     "refused_reasons": c.refused_reasons,
-                    "cpu_s": service::process_cpu_seconds(),
+                    "cpu_s": coordinator::cpu::process_cpu_seconds(),
                     "dispatch_ms_p50": c.dispatch_quantile(0.5),
                     "dispatch_ms_p99": c.dispatch_quantile(0.99),
                     "decide_s": c.decide_s,

@@ -302,34 +302,19 @@ fn absurd_numbers_are_usage_errors_never_panics() {
     for value in ["1e20", "0", "nan"] {
         fails(naofarm().args(["watch", "x", "--timeout-s", value]), 2);
     }
-    // An engine constant: refused by name with its range, before any trial
-    // runs; an unknown one with the names there are.
+    // A tunable walk setting: refused by name with its range, before any
+    // trial runs.
     for (kv, says) in [
         (
-            "step_aim=1e300",
-            "--engine: `step_aim`: 1e300 is outside [0, 1]",
+            "step_period=1e300",
+            "`step_period` = 1e300 is outside its admissible range",
         ),
         (
-            "hip_roll_rate=nan",
-            "--engine: `hip_roll_rate`: `nan` is not a finite number",
-        ),
-        (
-            "step_period=0.2",
-            "--engine: unknown engine constant `step_period` (known: period_s,",
+            "double_support=nan",
+            "--param `double_support=nan`: not a finite number",
         ),
     ] {
-        let err = fails(
-            naofarm().args([
-                "trial",
-                "--walk",
-                "closed-loop",
-                "--trials",
-                "1",
-                "--engine",
-                kv,
-            ]),
-            2,
-        );
+        let err = fails(naofarm().args(["trial", "--trials", "1", "--param", kv]), 2);
         assert!(err.contains(says), "{kv}: {err}");
     }
     for (field, value) in [("n_mcmc", "20000"), ("refresh_rate", "2.0")] {

@@ -612,9 +612,9 @@ fn outcome_worker(r: &Record) -> Option<String> {
     }
 }
 
-/// The README's field tables: schema name → (field, type) rows.
+/// The field tables of docs/topics.md: schema name → (field, type) rows.
 fn readme_schemas() -> std::collections::BTreeMap<String, Vec<(String, String)>> {
-    let text = std::fs::read_to_string(root().join("README.md")).unwrap();
+    let text = std::fs::read_to_string(root().join("docs/topics.md")).unwrap();
     let mut out = std::collections::BTreeMap::new();
     let mut current: Option<(String, Vec<(String, String)>)> = None;
     for line in text.lines() {
@@ -638,7 +638,7 @@ fn readme_schemas() -> std::collections::BTreeMap<String, Vec<(String, String)>>
 }
 
 /// Checks `v` against schema `name`: every documented field with its
-/// type, and no field the README does not document.
+/// type, and no field docs/topics.md does not document.
 fn conforms(
     schemas: &std::collections::BTreeMap<String, Vec<(String, String)>>,
     name: &str,
@@ -646,13 +646,13 @@ fn conforms(
 ) -> Result<(), String> {
     let rows = schemas
         .get(name)
-        .ok_or_else(|| format!("no schema {name} in the README"))?;
+        .ok_or_else(|| format!("no schema {name} in docs/topics.md"))?;
     let obj = v
         .as_object()
         .ok_or_else(|| format!("{name}: not an object: {v}"))?;
     for key in obj.keys() {
         if !rows.iter().any(|(f, _)| f == key) {
-            return Err(format!("{name}.{key} is not documented in the README"));
+            return Err(format!("{name}.{key} is not documented in docs/topics.md"));
         }
     }
     for (field, ty) in rows {
@@ -712,7 +712,10 @@ fn every_topic_matches_the_readme_field_tables() {
         "Stats",
         "Best",
     ] {
-        assert!(schemas.contains_key(s), "README lacks the {s} table");
+        assert!(
+            schemas.contains_key(s),
+            "docs/topics.md lacks the {s} table"
+        );
     }
     let dir = scratch("schema");
     let exp = experiment(&dir, 8);

@@ -1114,7 +1114,7 @@ fn a_farm_on_five_hosts_over_tls_survives_cut_links() {
     );
 }
 
-/// Runs the README's Python watcher over TLS (its block as it stands, with
+/// Runs the cluster guide's Python watcher over TLS (its block as it stands, with
 /// `ep` and `pki` put in) and checks that it lists run `name`. Skipped, saying
 /// so, where the `eclipse-zenoh` Python package is not installed.
 fn python_watcher_sees(ep: &str, pki: &Path, name: &str) {
@@ -1128,12 +1128,12 @@ fn python_watcher_sees(ep: &str, pki: &Path, name: &str) {
         );
         return;
     }
-    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
-    let block = readme
+    let guide = std::fs::read_to_string(root().join("docs/cluster.md")).unwrap();
+    let block = guide
         .split("```python\n")
         .map(|b| b.split("```").next().unwrap())
         .find(|b| b.contains("watcher.pem"))
-        .expect("the README's TLS Python watcher");
+        .expect("the cluster guide's TLS Python watcher");
     let script = block.replace("tls/10.0.0.1:7447", ep).replace(
         "pki = \"pki\"",
         &format!("pki = {:?}", pki.display().to_string()),

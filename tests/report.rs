@@ -227,12 +227,8 @@ fn report_writes_every_figure_and_table_iv_and_leaves_the_run_as_it_was() {
         );
     }
     // A synthetic run has no physics and fixes nothing: its set-up is empty.
-    assert!(page.contains("<th>walk</th><th>set-up</th>"), "{page}");
-    assert_eq!(
-        page.matches("<td>open-loop</td><td>–</td>").count(),
-        2,
-        "{page}"
-    );
+    assert!(page.contains("<th>type</th><th>set-up</th>"), "{page}");
+    assert_eq!(page.matches("<td>0</td><td>–</td>").count(), 2, "{page}");
     circles(&both.join("best.svg"));
     let page2 = std::fs::read_to_string(both.join("1-synthetic/index.html")).unwrap();
     assert!(page2.contains(" over 2 sessions "), "{page2}");
@@ -398,25 +394,30 @@ fn png_stats(path: &Path) -> (u32, u32, usize) {
 #[test]
 fn a_nao_report_has_an_animated_replay_of_expert_optim1_and_optim2() {
     let dir = scratch("report-nao");
-    // Experiment 2 on its converged physics (10 × 2 ms, no double support:
-    // the file's `[physics]` and `[fixed]`), so that the set-up must travel.
-    nao_run(&dir, "physical-technical-converged.toml");
+    // Experiment 2 with a `[physics]` count and a `[fixed]` walk setting of
+    // its own, so that the set-up must travel.
+    let text = std::fs::read_to_string(root().join("experiments/physical-technical.toml"))
+        .unwrap()
+        .replace("[pickout]", "[fixed]\ndouble_support = 0.02\n\n[pickout]");
+    let file = dir.join("set-up.toml");
+    std::fs::write(&file, format!("{text}\n[physics]\npgs_iterations = 30\n")).unwrap();
+    nao_run(&dir, file.to_str().unwrap());
     let out = report(&dir);
     let page = std::fs::read_to_string(out.join("index.html")).unwrap();
     let table: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("table4.json")).unwrap()).unwrap();
     // The run's set-up is on the page and in both tables.
     assert!(
-        page.contains("physics 10 x 2.000 ms steps per 20 ms cycle")
-            && page.contains("fixed: double_support = 0"),
+        page.contains("physics 4 x 5.000 ms steps per 20 ms cycle, 1 solver x 30 PGS iterations")
+            && page.contains("fixed: double_support = 0.02"),
         "the set-up on the page"
     );
-    assert_eq!(table["physics"]["substeps"], 10);
-    assert_eq!(table["fixed"]["double_support"], 0.0);
+    assert_eq!(table["physics"]["pgs_iterations"], 30);
+    assert_eq!(table["fixed"]["double_support"], 0.02);
     let md = std::fs::read_to_string(out.join("table4.md")).unwrap();
-    assert!(md.contains("physics 10 x 2.000 ms"), "{md}");
+    assert!(md.contains("1 solver x 30 PGS iterations"), "{md}");
     assert!(
-        md.contains("| double_support (fixed) | 0.0000 | 0.0000 | 0.0000 |"),
+        md.contains("| double_support (fixed) | 0.0200 | 0.0200 | 0.0200 |"),
         "{md}"
     );
     for (k, name) in [
@@ -458,16 +459,7 @@ fn a_nao_report_has_an_animated_replay_of_expert_optim1_and_optim2() {
         // the same trial run by `naofarm trial` says how long it lasted.
         let column = &table["columns"][k];
         let mut trial = naofarm();
-        trial.args([
-            "trial",
-            "--trials",
-            "1",
-            "--seed",
-            "777",
-            "--walk",
-            "closed-loop",
-            "--json",
-        ]);
+        trial.args(["trial", "--trials", "1", "--seed", "777", "--json"]);
         // Table IV's JSON says everything the trial needs: the column's
         // parameters, the run's fixed values and its physics.
         for (p, v) in column["params"]
@@ -483,9 +475,6 @@ fn a_nao_report_has_an_animated_replay_of_expert_optim1_and_optim2() {
             ("--substeps", "substeps"),
             ("--solver-iterations", "solver_iterations"),
             ("--pgs-iterations", "pgs_iterations"),
-            ("--armature", "armature_kg_m2"),
-            ("--contact-hz", "contact_hz"),
-            ("--firm-stops", "firm_stops"),
         ] {
             trial.arg(flag).arg(physics[key].to_string());
         }

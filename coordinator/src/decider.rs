@@ -261,7 +261,7 @@ fn hold_hook() -> Option<(u64, u64)> {
 /// `/proc/thread-self/stat` (Linux; clock ticks of 1/100 s). `None` elsewhere.
 #[must_use]
 pub fn thread_cpu_seconds() -> Option<f64> {
-    crate::service::cpu_seconds_of("/proc/thread-self/stat")
+    crate::cpu::cpu_seconds_of("/proc/thread-self/stat")
 }
 
 fn serve(

@@ -7,7 +7,7 @@
 //!   its damage rules), [`lock`] (one coordinator per run directory), [`run`]
 //!   (a run on disk: create, resume, extend, salvage, replay a farm trial),
 //!   [`decider`] (the run on its own thread, so its journal and CLOP's fits
-//!   never hold up the transport);
+//!   never hold up the transport), [`cpu`] (the CPU time it costs);
 //! - **transport**: [`schedule`] (who runs which trial, leases and liveness, a
 //!   pure part under the caller's clock) and [`service`] (the zenoh loop that
 //!   moves messages between workers, watchers and the run), and for watchers
@@ -19,6 +19,7 @@
 #![warn(missing_docs)]
 
 pub mod clop;
+pub mod cpu;
 pub mod decider;
 pub mod evolve;
 pub mod follow;

@@ -104,77 +104,6 @@ impl TrialModel {
     }
 }
 
-/// Which walk engine the NAO's trials use (`walk = "…"`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "kebab-case")]
-pub enum WalkEngine {
-    /// The first engine: a LIP-3D plan played open loop at 0.40 s steps
-    /// (the default, so experiments and journals from before the field keep
-    /// their bits).
-    #[default]
-    OpenLoop,
-    /// A LIP-3D plan at the league's pace, balanced at 50 Hz from the robot's
-    /// own noisy sensors (`worker::nao::balance`).
-    ClosedLoop,
-}
-
-/// A feedback gain (`hip_pitch_gain`, `ankle_pitch_gain`, `turn_place`, `step_aim`,
-/// `lean_place`, `hip_roll_rate_gain`, `step_aim_heading`, `tilt_vector`,
-/// `pitch_hold_gain`, `pitch_hold_rad`, `pitch_hold_ankle`, `step_aim_before`) needs a walk with
-/// feedback: the open loop has none to give it to, so a parameter set for it
-/// that names one is refused (by an experiment file and by `naofarm trial`).
-pub fn gain_has_feedback(walk: WalkEngine, name: &str) -> Result<(), String> {
-    let gain = params::find(name).is_some_and(|k| {
-        matches!(
-            k.param,
-            params::Param::HipPitchGain
-                | params::Param::AnklePitchGain
-                | params::Param::TurnPlace
-                | params::Param::StepAim
-                | params::Param::LeanPlace
-                | params::Param::HipRollRateGain
-                | params::Param::StepAimHeading
-                | params::Param::TiltVector
-                | params::Param::PitchHoldGain
-                | params::Param::PitchHold
-                | params::Param::PitchHoldAnkle
-                | params::Param::StepAimBefore
-        )
-    });
-    if gain && walk == WalkEngine::OpenLoop {
-        return Err(format!(
-            "`{name}` is a gain of the closed-loop walk's feedback, and the open-loop walk has none"
-        ));
-    }
-    Ok(())
-}
-
-impl WalkEngine {
-    /// Every engine, by its name in experiment files.
-    pub const ALL: [(&'static str, Self); 2] = [
-        ("open-loop", Self::OpenLoop),
-        ("closed-loop", Self::ClosedLoop),
-    ];
-
-    /// Parses an engine's name.
-    pub fn parse(s: &str) -> Result<Self, String> {
-        Self::ALL
-            .iter()
-            .find(|(n, _)| *n == s)
-            .map(|(_, w)| *w)
-            .ok_or_else(|| format!("unknown walk `{s}` (expected `open-loop` or `closed-loop`)"))
-    }
-
-    /// The engine's name in experiment files.
-    #[must_use]
-    pub fn name(self) -> &'static str {
-        Self::ALL
-            .iter()
-            .find(|(_, w)| *w == self)
-            .map_or("?", |(n, _)| n)
-    }
-}
-
 /// Where the evolving process starts (`docs/spec/evolve.md`, Algorithm 1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
@@ -251,139 +180,51 @@ impl Default for ClopSettings {
     }
 }
 
-/// How the workers' rapier3d integrates each 20 ms agent cycle of a NAO trial
-/// (`[physics]`; ignored by the synthetic model). The default is the measured
-/// balance of speed and fidelity to the league (`naofarm bench sim`); finer
-/// steps, or a rotor inertia the league's robot does not have, keep joints
-/// closer to their stops when a gait leans on them.
+/// How finely the workers' rapier3d integrates each 20 ms agent cycle of a
+/// NAO trial (`[physics]`, optional; ignored by the synthetic model). The
+/// defaults are the one physics naofarm ships (docs/walk.md, "The physics"):
+/// an experiment needs no `[physics]` section, and a change to these counts
+/// is a measurement of the physics, not another walk.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Physics {
-    /// Physics steps per 20 ms cycle (1..=50).
+    /// Physics steps per 20 ms cycle (1..=50; default 4, 5 ms steps).
     pub substeps: u32,
-    /// Rapier solver iterations per step (1..=16).
+    /// Rapier solver iterations per step (1..=16; default 1).
     pub solver_iterations: u32,
-    /// Inner PGS iterations per solver iteration (1..=200).
+    /// Inner PGS iterations per solver iteration (1..=200; default 28).
     pub pgs_iterations: u32,
-    /// Reflected rotor inertia added to every motorised hinge, kg·m² (0..=0.1;
-    /// MuJoCo's `armature`). The league's robot has none (0, the default).
-    pub armature_kg_m2: f64,
-    /// Natural frequency of the feet's contact with the ground, Hz (10..=10000;
-    /// damping ratio 10). The default 500 is stiffer than rapier's own 60 Hz
-    /// for contacts with a fixed body; `firm_stops` walks on the softer one.
-    pub contact_hz: f64,
-    /// Joint stops that hold within a physics step (the patch of the
-    /// vendored rapier3d, `vendor/rapier3d/NAOFARM.md`): a joint within 3° of a
-    /// stop gets a speculative limit row, which lets it reach the stop within
-    /// the step and no further, and the limit rows are solved again after the
-    /// contacts, so that a landing cannot push a joint through its stop.
-    /// Off (the default): rapier's stops, engaged only past the stop.
-    pub firm_stops: bool,
-    /// With `firm_stops`, how near a stop a joint gets its speculative limit
-    /// row, degrees (1..=20; default 3). A joint that comes at a stop faster
-    /// than this per physics step passes it before its row is in place: the
-    /// arms file's faster walk needs 8 (`docs/walk.md`, "The stop window").
-    pub firm_stop_window_deg: f64,
-    /// With `firm_stops`, a joint also gets its speculative limit row when
-    /// its speed would carry it into the window within this many physics
-    /// steps (0..=10; 0, the default: the window alone). A light link flung
-    /// by a staggering walk crosses the whole window in one step and passes
-    /// its stop before its row is in place: the capped lean file's corner
-    /// `10011` so flings an elbow yaw 7.23° past its stop, and 1 step of
-    /// look-ahead keeps it within 0.01° (`docs/walk.md`, "A stop row ahead
-    /// of a flung joint").
-    pub firm_stop_lookahead: u32,
-    /// Weld the elbow yaws (`lae3`, `rae3`) at 0°, where the walk holds
-    /// them (default false). With the arms swinging, at 5 ms steps those
-    /// light links swing out against their servos, as they do not at 1 ms,
-    /// and the fast walks lean on it (`docs/walk.md`, "What the look-ahead
-    /// does not mend"); welded, a walk cannot.
-    pub weld_elbow_yaws: bool,
-    /// With it (`substeps`..=50), each trial draws its physics steps per
-    /// cycle uniformly from `substeps..=substeps_max` by its seed, so that
-    /// CLOP maximises the mean over a band of steps and cannot fit an
-    /// optimum to one of them (`docs/walk.md`, "CLOP optimises into the
-    /// time step"). 0 (the default): every trial takes `substeps`.
-    pub substeps_max: u32,
 }
 
 impl std::fmt::Display for Physics {
-    /// `10 x 2.000 ms steps per 20 ms cycle, 1 solver x 12 PGS iterations, armature 0 kg m^2`.
+    /// `4 x 5.000 ms steps per 20 ms cycle, 1 solver x 28 PGS iterations`.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "{} x {:.3} ms steps per 20 ms cycle, {} solver x {} PGS iterations, armature {} kg m^2",
+            "{} x {:.3} ms steps per 20 ms cycle, {} solver x {} PGS iterations",
             self.substeps,
             self.step_ms(),
             self.solver_iterations,
             self.pgs_iterations,
-            self.armature_kg_m2
-        )?;
-        // The two later keys only when set, so a default run reads as before.
-        if self.contact_hz != Self::default().contact_hz {
-            write!(f, ", ground contact {} Hz", self.contact_hz)?;
-        }
-        if self.substeps_max != 0 {
-            write!(
-                f,
-                ", drawn per trial from {}-{} steps per cycle",
-                self.substeps, self.substeps_max
-            )?;
-        }
-        if self.weld_elbow_yaws {
-            write!(f, ", elbow yaws welded")?;
-        }
-        if self.firm_stops {
-            write!(f, ", firm stops")?;
-            if self.firm_stop_window_deg != Self::default().firm_stop_window_deg {
-                write!(f, " within {} deg", self.firm_stop_window_deg)?;
-            }
-            match self.firm_stop_lookahead {
-                0 => {}
-                1 => write!(f, " or 1 step ahead")?,
-                k => write!(f, " or {k} steps ahead")?,
-            }
-        }
-        Ok(())
+        )
     }
 }
 
 impl Default for Physics {
     fn default() -> Self {
         Self {
-            substeps: 2,
+            substeps: 4,
             solver_iterations: 1,
-            pgs_iterations: 12,
-            armature_kg_m2: 0.0,
-            contact_hz: 500.0,
-            firm_stops: false,
-            firm_stop_window_deg: 3.0,
-            firm_stop_lookahead: 0,
-            weld_elbow_yaws: false,
-            substeps_max: 0,
+            pgs_iterations: 28,
         }
     }
 }
 
 impl Physics {
-    /// One physics step, ms: the 20 ms cycle over `substeps` (the coarsest
-    /// step of a band).
+    /// One physics step, ms: the 20 ms cycle over `substeps`.
     #[must_use]
     pub fn step_ms(&self) -> f64 {
         20.0 / f64::from(self.substeps.max(1))
-    }
-
-    /// The firm file's physics (`experiments/physical-technical-firm.toml`):
-    /// firm stops, 28 PGS iterations and a 60 Hz ground at the farm's
-    /// 2 × 10 ms steps (docs/walk.md, "Firm stops").
-    #[must_use]
-    pub fn firm() -> Self {
-        Self {
-            pgs_iterations: 28,
-            contact_hz: 60.0,
-            firm_stops: true,
-            ..Self::default()
-        }
     }
 
     /// Checks each count against its range; names the first one outside.
@@ -396,32 +237,6 @@ impl Physics {
             if v == 0 || v > hi {
                 return Err((field, format!("{v} is not in 1..={hi}")));
             }
-        }
-        let m = self.substeps_max;
-        if m != 0 && !(self.substeps..=50).contains(&m) {
-            return Err((
-                "substeps_max",
-                format!("{m} is not 0 or in {}..=50 (substeps..=50)", self.substeps),
-            ));
-        }
-        let a = self.armature_kg_m2;
-        if !(a.is_finite() && (0.0..=0.1).contains(&a)) {
-            return Err(("armature_kg_m2", format!("{} is not in [0, 0.1]", Shown(a))));
-        }
-        let c = self.contact_hz;
-        if !(c.is_finite() && (10.0..=10_000.0).contains(&c)) {
-            return Err(("contact_hz", format!("{} is not in [10, 10000]", Shown(c))));
-        }
-        let k = self.firm_stop_lookahead;
-        if k > 10 {
-            return Err(("firm_stop_lookahead", format!("{k} is not in 0..=10")));
-        }
-        let w = self.firm_stop_window_deg;
-        if !(w.is_finite() && (1.0..=20.0).contains(&w)) {
-            return Err((
-                "firm_stop_window_deg",
-                format!("{} is not in [1, 20]", Shown(w)),
-            ));
         }
         Ok(())
     }
@@ -469,9 +284,6 @@ pub struct Experiment {
     /// Physics of the NAO trials.
     #[serde(default)]
     pub physics: Physics,
-    /// The NAO's walk engine (default `open-loop`).
-    #[serde(default)]
-    pub walk: WalkEngine,
 }
 
 fn default_trials() -> u32 {
@@ -558,26 +370,6 @@ impl Experiment {
                     ));
                 }
             }
-            let engine_constant = params::find(&p.name).is_some_and(|k| {
-                matches!(
-                    k.param,
-                    params::Param::StepPeriod
-                        | params::Param::DoubleSupport
-                        | params::Param::ComAboveHip
-                        | params::Param::HipRollComp
-                )
-            });
-            gain_has_feedback(self.walk, &p.name).map_err(|m| invalid(f("name"), m))?;
-            if engine_constant && p.expert.is_none() && self.walk == WalkEngine::OpenLoop {
-                return Err(invalid(
-                    f("expert"),
-                    format!(
-                        "`{}` needs an expert value with walk = \"open-loop\": the registry's \
-                         default is the closed-loop engine's",
-                        p.name
-                    ),
-                ));
-            }
             match p.kind {
                 ParamKind::Gamma if p.lower <= 0.0 => {
                     return Err(invalid(f("lower"), "a gamma parameter needs lower > 0"))
@@ -602,7 +394,6 @@ impl Experiment {
         for (name, v) in &self.fixed {
             let field = format!("fixed.{name}");
             params::check_value(name, *v).map_err(|m| invalid(&field, m))?;
-            gain_has_feedback(self.walk, name).map_err(|m| invalid(&field, m))?;
             if self.parameter.iter().any(|p| &p.name == name) {
                 return Err(invalid(field, "is also an optimised [[parameter]]"));
             }
@@ -819,60 +610,17 @@ expert = -0.04
                 "iterations = 5\n[physics]\ntimestep = 0.001",
                 "timestep",
             ),
+            // The physics' variants are gone: a file that still asks for
+            // one is told which key is no longer known.
             (
                 "iterations = 5",
-                "iterations = 5\n[physics]\narmature_kg_m2 = nan",
-                "physics.armature_kg_m2",
-            ),
-            (
-                "iterations = 5",
-                "iterations = 5\n[physics]\ncontact_hz = 5.0",
-                "physics.contact_hz",
-            ),
-            (
-                "iterations = 5",
-                "iterations = 5\n[physics]\nfirm_stop_window_deg = 45.0",
-                "physics.firm_stop_window_deg",
-            ),
-            (
-                "iterations = 5",
-                "iterations = 5\n[physics]\nfirm_stop_window_deg = nan",
-                "physics.firm_stop_window_deg",
-            ),
-            (
-                "iterations = 5",
-                "iterations = 5\n[physics]\nfirm_stop_lookahead = 11",
-                "physics.firm_stop_lookahead",
-            ),
-            (
-                "iterations = 5",
-                "iterations = 5\n[physics]\nfirm_stop_lookahead = -1",
-                "firm_stop_lookahead",
-            ),
-            (
-                "iterations = 5",
-                "iterations = 5\n[physics]\nweld_elbow_yaws = 1",
-                "weld_elbow_yaws",
-            ),
-            (
-                "iterations = 5",
-                "iterations = 5\n[physics]\nsubsteps = 16\nsubsteps_max = 12",
-                "physics.substeps_max",
-            ),
-            (
-                "iterations = 5",
-                "iterations = 5\n[physics]\nsubsteps_max = 51",
-                "physics.substeps_max",
-            ),
-            (
-                "iterations = 5",
-                "iterations = 5\n[physics]\ncontact_hz = inf",
-                "physics.contact_hz",
-            ),
-            (
-                "iterations = 5",
-                "iterations = 5\n[physics]\nfirm_stops = 1",
+                "iterations = 5\n[physics]\nfirm_stops = true",
                 "firm_stops",
+            ),
+            (
+                "iterations = 5",
+                "iterations = 5\nwalk = \"closed-loop\"",
+                "walk",
             ),
         ];
         for (from, to, needle) in cases {
@@ -889,153 +637,58 @@ expert = -0.04
         assert!(msg.contains("line 2"), "{msg}");
     }
 
-    /// Experiment 1 on the band walks with experiment 2's expert there: its
-    /// one parameter's bounds aside, the two files give a worker the same
-    /// values and physics.
+    /// Every shipped experiment parses; the paper's two run the one
+    /// physics (no `[physics]` section) and the one engine's constants (no
+    /// `[fixed]` walk settings), and experiment 1 shares experiment 2's
+    /// expert.
     #[test]
-    fn the_band_files_share_their_expert_and_physics() {
+    fn shipped_experiments_parse() {
         let read = |f: &str| {
             let path = format!("{}/../experiments/{f}", env!("CARGO_MANIFEST_DIR"));
-            Experiment::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap()
+            let text = std::fs::read_to_string(&path).unwrap();
+            Experiment::from_toml(&text).unwrap_or_else(|e| panic!("{f}: {e}"))
         };
-        let one = read("physical-converged-band.toml");
-        let two = read("physical-technical-converged-period-band.toml");
-        let values = |e: &Experiment| -> BTreeMap<String, f64> {
-            e.full_params(&e.expert_values()).into_iter().collect()
-        };
-        assert_eq!(values(&one), values(&two));
-        assert_eq!(one.physics, two.physics);
+        let dir = format!("{}/../experiments", env!("CARGO_MANIFEST_DIR"));
+        let mut n = 0;
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                let f = path.file_name().unwrap().to_string_lossy().into_owned();
+                read(&f);
+                n += 1;
+            }
+        }
+        assert!(n >= 3, "{n} files");
+        let one = read("physical.toml");
+        let two = read("physical-technical.toml");
+        for e in [&one, &two] {
+            assert_eq!(e.physics, Physics::default(), "{}", e.name);
+            assert!(e.fixed.is_empty(), "{}: {:?}", e.name, e.fixed);
+            assert_eq!(e.trial_duration_s, 10.0);
+        }
+        assert_eq!(one.param_names(), ["ThighRelHip2_Z"]);
+        assert_eq!(two.param_names().len(), 5);
+        assert_eq!(one.expert_values()[0], two.expert_values()[0]);
+        assert_eq!((one.pickout, one.clop), (two.pickout, two.clop));
         assert_eq!(
-            (one.walk, one.pickout, one.clop),
-            (two.walk, two.pickout, two.clop)
+            Physics::default().to_string(),
+            "4 x 5.000 ms steps per 20 ms cycle, 1 solver x 28 PGS iterations"
         );
     }
 
-    #[test]
-    fn shipped_experiments_parse() {
-        for f in [
-            "physical.toml",
-            "physical-technical.toml",
-            "physical-converged.toml",
-            "physical-technical-converged.toml",
-            "physical-technical-converged-period.toml",
-            "physical-technical-converged-period-1ms.toml",
-            "physical-technical-converged-period-band.toml",
-            "physical-converged-band.toml",
-            "physical-converged-band-aim.toml",
-            "physical-technical-converged-period-band-reach.toml",
-            "physical-technical-converged-period-band-reach-aim.toml",
-            "physical-technical-converged-period-band-reach11-aim.toml",
-            "physical-stiff.toml",
-            "physical-firm.toml",
-            "physical-technical-stiff.toml",
-            "physical-technical-firm.toml",
-            "physical-technical-arms.toml",
-            "physical-arms.toml",
-            "physical-technical-arms-5ms.toml",
-            "physical-arms-5ms.toml",
-            "physical-technical-arms-5ms-roll.toml",
-            "physical-arms-5ms-roll.toml",
-            "physical-technical-arms-5ms-roll-aim.toml",
-            "physical-arms-5ms-roll-aim.toml",
-        ] {
-            let path = format!("{}/../experiments/{f}", env!("CARGO_MANIFEST_DIR"));
-            let text = std::fs::read_to_string(&path).unwrap();
-            let e = Experiment::from_toml(&text).unwrap_or_else(|e| panic!("{f}: {e}"));
-            if f.ends_with("converged.toml") {
-                assert_eq!(e.physics.substeps, 10, "{f}");
-                assert_eq!(e.fixed.get("double_support"), Some(&0.0), "{f}");
-            }
-            // The step-period file at 1 ms, and with each trial's step drawn
-            // from 1.25 to 0.67 ms; every other file at one step.
-            let band = match f {
-                "physical-technical-converged-period-1ms.toml" => (20, 0),
-                "physical-technical-converged-period-band.toml"
-                | "physical-converged-band.toml"
-                | "physical-converged-band-aim.toml"
-                | "physical-technical-converged-period-band-reach.toml"
-                | "physical-technical-converged-period-band-reach-aim.toml"
-                | "physical-technical-converged-period-band-reach11-aim.toml" => (16, 30),
-                _ => (e.physics.substeps, 0),
-            };
-            assert_eq!((e.physics.substeps, e.physics.substeps_max), band, "{f}");
-            // Only the reach files cap the plan's steps (the reach11 file
-            // 10 % wider), and only the aim files aim them short by the
-            // legs' overreach.
-            let reach = if f.contains("band-reach11") {
-                Some(&1.1)
-            } else {
-                f.contains("band-reach").then_some(&1.0)
-            };
-            assert_eq!(e.fixed.get("step_reach"), reach, "{f}");
-            let aim = f.ends_with("-aim.toml").then_some(&0.3);
-            assert_eq!(e.fixed.get("step_aim"), aim, "{f}");
-            if f.contains("band") {
-                assert!(e
-                    .physics
-                    .to_string()
-                    .ends_with("drawn per trial from 16-30 steps per cycle"));
-            }
-            if f.ends_with("-firm.toml") {
-                assert_eq!(e.physics, Physics::firm(), "{f}");
-            }
-            if f.ends_with("stiff.toml") {
-                assert_eq!(e.physics.substeps, Physics::default().substeps, "{f}");
-                assert_eq!(e.physics.pgs_iterations, 32, "{f}");
-                assert_eq!(e.fixed.get("hip_pitch_gain"), Some(&-0.75), "{f}");
-            }
-            if f.contains("arms") {
-                assert_eq!(e.fixed.get("arm_swing"), Some(&0.4), "{f}");
-                // Only the roll files widen the stance hip's roll.
-                let roll = if f.contains("-roll") { 0.09 } else { 0.07 };
-                assert_eq!(e.fixed.get("hip_roll_comp"), Some(&roll), "{f}");
-                assert_eq!(e.physics.firm_stop_window_deg, 8.0, "{f}");
-                assert!(e
-                    .physics
-                    .to_string()
-                    .ends_with("ground contact 60 Hz, firm stops within 8 deg"));
-            } else {
-                assert_eq!(e.physics.firm_stop_window_deg, 3.0, "{f}");
-            }
-            if f.ends_with("firm.toml") || f.contains("arms") {
-                let substeps = if f.contains("5ms") {
-                    4
-                } else {
-                    Physics::default().substeps
-                };
-                assert_eq!(e.physics.substeps, substeps, "{f}");
-                assert!(e.physics.firm_stops && e.physics.contact_hz == 60.0, "{f}");
-                assert!(e
-                    .physics
-                    .to_string()
-                    .contains("ground contact 60 Hz, firm stops"));
-            } else {
-                assert!(!e.physics.firm_stops, "{f}");
-                assert_eq!(e.physics.contact_hz, Physics::default().contact_hz, "{f}");
-            }
-        }
-    }
-
-    /// The walk engine's constants are parameters too (fixed or optimised);
-    /// their registry defaults are the closed-loop engine's, so an open-loop
-    /// experiment that optimises one must say where it starts.
+    /// The walk engine's plan constants a user may tune are parameters
+    /// (fixed or optimised), within their admissible ranges.
     #[test]
     fn the_walk_engines_constants_are_parameters() {
         let period = GOOD.replace("ThighRelHip2_Z", "step_period").replace(
             "lower = -0.08\nupper = -0.03\nexpert = -0.04",
             "lower = 0.15\nupper = 0.26\nexpert = 0.18",
         );
-        let e = Experiment::from_toml(&format!("walk = \"closed-loop\"\n{period}")).unwrap();
+        let e = Experiment::from_toml(&period).unwrap();
         assert_eq!(e.expert_values(), vec![0.18]);
         let no_expert = period.replace("expert = 0.18\n", "");
-        let e = Experiment::from_toml(&format!("walk = \"closed-loop\"\n{no_expert}")).unwrap();
-        assert_eq!(e.expert_values(), vec![0.18]);
-        let msg = err(&format!("walk = \"open-loop\"\n{no_expert}"));
-        assert!(
-            msg.contains("parameter[0].expert") && msg.contains("step_period"),
-            "{msg}"
-        );
-        Experiment::from_toml(&format!("walk = \"open-loop\"\n{period}")).unwrap();
+        let e = Experiment::from_toml(&no_expert).unwrap();
+        assert_eq!(e.expert_values(), vec![0.16]);
         let fixed = format!("{GOOD}\n[fixed]\ndouble_support = 0.6\n");
         assert!(
             err(&fixed).contains("fixed.double_support"),
@@ -1044,31 +697,12 @@ expert = -0.04
         );
         let fixed = format!("{GOOD}\n[fixed]\nstep_period = nan\n");
         assert!(err(&fixed).contains("fixed.step_period"), "{}", err(&fixed));
-    }
-
-    /// The feedback's gains are parameters of the closed-loop walk; the open
-    /// loop, which has no feedback, refuses them by name, fixed or optimised.
-    #[test]
-    fn feedback_gains_are_closed_loop_parameters() {
-        let fixed = format!("{GOOD}\n[fixed]\nhip_pitch_gain = -0.75\nankle_pitch_gain = 0.3\n");
-        let e = Experiment::from_toml(&format!("walk = \"closed-loop\"\n{fixed}")).unwrap();
-        assert_eq!(e.fixed.get("hip_pitch_gain"), Some(&-0.75));
-        let msg = err(&format!("walk = \"open-loop\"\n{fixed}"));
+        // A feedback gain is the engine's own, no parameter.
+        let gain = format!("{GOOD}\n[fixed]\nhip_pitch_gain = -0.75\n");
         assert!(
-            msg.contains("fixed.ankle_pitch_gain") && msg.contains("open-loop"),
-            "{msg}"
+            err(&gain).contains("unknown parameter `hip_pitch_gain`"),
+            "{}",
+            err(&gain)
         );
-        let gain = GOOD.replace("ThighRelHip2_Z", "hip_pitch_gain").replace(
-            "lower = -0.08\nupper = -0.03\nexpert = -0.04",
-            "lower = -2.0\nupper = 0.0\nexpert = -1.0",
-        );
-        Experiment::from_toml(&format!("walk = \"closed-loop\"\n{gain}")).unwrap();
-        let msg = err(&format!("walk = \"open-loop\"\n{gain}"));
-        assert!(
-            msg.contains("parameter[0].name") && msg.contains("hip_pitch_gain"),
-            "{msg}"
-        );
-        let far = format!("{GOOD}\n[fixed]\nhip_pitch_gain = 9.0\n");
-        assert!(err(&format!("walk = \"closed-loop\"\n{far}")).contains("fixed.hip_pitch_gain"));
     }
 }

@@ -22,9 +22,7 @@ pub mod pickout;
 pub mod seed;
 pub mod wire;
 
-pub use experiment::{
-    Experiment, ExperimentError, ParamKind, ParamSpec, Physics, TrialModel, WalkEngine,
-};
+pub use experiment::{Experiment, ExperimentError, ParamKind, ParamSpec, Physics, TrialModel};
 pub use wire::{
     Decision, DecodeError, IterationResult, RunStatus, Stats, TrialOutcome, TrialRequest,
     WireMessage, WorkerPresence, WIRE_VERSION,

@@ -46,36 +46,6 @@ pub enum Param {
     DoubleSupport,
     /// `com_above_hip`.
     ComAboveHip,
-    /// `hip_pitch_gain`.
-    HipPitchGain,
-    /// `ankle_pitch_gain`.
-    AnklePitchGain,
-    /// `hip_roll_comp`.
-    HipRollComp,
-    /// `arm_swing`.
-    ArmSwing,
-    /// `turn_place`.
-    TurnPlace,
-    /// `step_reach`.
-    StepReach,
-    /// `step_aim`.
-    StepAim,
-    /// `lean_place`.
-    LeanPlace,
-    /// `hip_roll_rate_gain`.
-    HipRollRateGain,
-    /// `step_aim_heading`.
-    StepAimHeading,
-    /// `tilt_vector`.
-    TiltVector,
-    /// `pitch_hold_gain`.
-    PitchHoldGain,
-    /// `pitch_hold_rad`.
-    PitchHold,
-    /// `pitch_hold_ankle`.
-    PitchHoldAnkle,
-    /// `step_aim_before`.
-    StepAimBefore,
 }
 
 impl Param {
@@ -205,9 +175,8 @@ pub const KNOWN: &[KnownParam] = &[
         default: 0.07,
         doc: "elbow forward of the upper-arm centre",
     },
-    // The walk engine's own plan constants, as parameters: given, they
-    // replace the engine's value (docs/walk.md); not given, each engine keeps
-    // its own, so the defaults here are the closed-loop engine's.
+    // The walk engine's plan constants a user may tune: the defaults are the
+    // engine's own (docs/walk.md, "The plan").
     KnownParam {
         param: Param::StepPeriod,
         name: "step_period",
@@ -215,8 +184,8 @@ pub const KNOWN: &[KnownParam] = &[
         min: 0.10,
         max: 0.60,
         unit: "s",
-        default: 0.18,
-        doc: "step period; not given, the engine's own (closed loop 0.18 s, open loop 0.40 s)",
+        default: 0.16,
+        doc: "step period (one step of one foot)",
     },
     KnownParam {
         param: Param::DoubleSupport,
@@ -225,8 +194,8 @@ pub const KNOWN: &[KnownParam] = &[
         min: 0.0,
         max: 0.5,
         unit: "1",
-        default: 0.05,
-        doc: "double-support share of a step; not given, the engine's own (closed loop 0.05, open loop 0.10)",
+        default: 0.0,
+        doc: "double-support share of a step",
     },
     KnownParam {
         param: Param::ComAboveHip,
@@ -235,172 +204,8 @@ pub const KNOWN: &[KnownParam] = &[
         min: -0.05,
         max: 0.15,
         unit: "m",
-        default: 0.03,
-        doc: "the plan's centre of mass above the hip centre (the pendulum's height); not given, the engine's own (closed loop 0.03 m, open loop 0.03 m)",
-    },
-    // The closed-loop walk's feedback gains, as parameters (the open loop
-    // has no feedback: an experiment of it may not give them).
-    KnownParam {
-        param: Param::HipPitchGain,
-        name: "hip_pitch_gain",
-        role: Role::Walk,
-        min: -5.0,
-        max: 5.0,
-        unit: "rad/rad",
-        default: -1.5,
-        doc: "stance hip pitch per rad of sensed torso pitch; not given, the closed-loop engine's own (-1.5)",
-    },
-    KnownParam {
-        param: Param::AnklePitchGain,
-        name: "ankle_pitch_gain",
-        role: Role::Walk,
-        min: -5.0,
-        max: 5.0,
-        unit: "rad/rad",
-        default: 0.0,
-        doc: "stance ankle pitch per rad of sensed torso pitch; not given, the closed-loop engine's own (0)",
-    },
-    // Two more plan constants: the stance hip's roll and the arms' swing.
-    KnownParam {
-        param: Param::HipRollComp,
-        name: "hip_roll_comp",
-        role: Role::Walk,
-        min: 0.0,
-        max: 0.4,
-        unit: "rad",
-        default: 0.10,
-        doc: "stance hip-roll compensation during single support; not given, the engine's own (closed loop 0.10 rad, open loop 0.20 rad)",
-    },
-    KnownParam {
-        param: Param::ArmSwing,
-        name: "arm_swing",
-        role: Role::Walk,
-        min: 0.0,
-        max: 1.0,
-        unit: "rad",
-        default: 0.0,
-        doc: "each shoulder pitch turned against the opposite leg, per step length that leg's foot leads; not given, the engine's own (0: arms still, welded to the torso in a trial)",
-    },
-    // Where the feet land when the torso turns.
-    KnownParam {
-        param: Param::TurnPlace,
-        name: "turn_place",
-        role: Role::Walk,
-        min: 0.0,
-        max: 2.0,
-        unit: "rad/rad",
-        default: 0.0,
-        doc: "the feet placed against this share of the torso's sensed turn about the vertical (1: where the plan has them in the walk's frame); not given, the closed-loop engine's own (0: in the torso's frame)",
-    },
-    // What the plan may ask of the swing.
-    KnownParam {
-        param: Param::StepReach,
-        name: "step_reach",
-        role: Role::Walk,
-        min: 0.0,
-        max: 5.0,
-        unit: "1",
-        default: 0.0,
-        doc: "the planned step shortened until the thighs part in a swing, on average (2 x step / (hip height x swing time)), at most this many times the hip pitch's speed cap; not given, every engine's own (0: the step xlength_step_max asks)",
-    },
-    // Where the legs land against where they were aimed.
-    KnownParam {
-        param: Param::StepAim,
-        name: "step_aim",
-        role: Role::Walk,
-        min: 0.0,
-        max: 1.0,
-        unit: "1",
-        default: 0.0,
-        doc: "each step's share in the closed loop's estimate of how far the legs land past their aim (sensed feet spacing over aimed, at each step's end); the plan is aimed short by it so the feet land its steps; not given, the closed-loop engine's own (0: aimed as planned)",
-    },
-    // Where a torso leaning forward puts the feet.
-    KnownParam {
-        param: Param::LeanPlace,
-        name: "lean_place",
-        role: Role::Walk,
-        min: 0.0,
-        max: 2.0,
-        unit: "rad/rad",
-        default: 0.0,
-        doc: "a foot placed against this share of the torso's sensed forward lean, in the share its load leaves it (1: a foot in the air where the plan has it in the walk's frame); a torso leaning back moves no foot; not given, the closed-loop engine's own (0: in the torso's frame)",
-    },
-    // The stance hip's roll against the torso's sensed roll rate.
-    KnownParam {
-        param: Param::HipRollRateGain,
-        name: "hip_roll_rate_gain",
-        role: Role::Walk,
-        min: -5.0,
-        max: 5.0,
-        unit: "rad/(rad/s)",
-        default: 0.0,
-        doc: "stance hip roll per rad/s of the gyro's sensed torso roll rate, weighted by the leg's share of the sensed load (a damper of the sideways rock); not given, the closed-loop engine's own (0)",
-    },
-    // Which way step_aim reads a step.
-    KnownParam {
-        param: Param::StepAimHeading,
-        name: "step_aim_heading",
-        role: Role::Walk,
-        min: 0.0,
-        max: 1.0,
-        unit: "1",
-        default: 0.0,
-        doc: "the share of the torso's sensed turn (the gyro's yaw rate integrated) by which step_aim's reading of the feet spacing is turned back towards the walk's heading (1: along the heading; a torso that yaws with each step sees its feet's sideways offset as spacing); not given, the closed-loop engine's own (0: along the torso's x axis)",
-    },
-    // How the tilt estimate reads the accelerometer.
-    KnownParam {
-        param: Param::TiltVector,
-        name: "tilt_vector",
-        role: Role::Walk,
-        min: 0.0,
-        max: 1.0,
-        unit: "1",
-        default: 0.0,
-        doc: "the closed loop's tilt estimate's share from the filter that keeps gravity as a vector (turned by the gyro, pulled linearly towards each accelerometer reading) rather than each cycle's accelerometer angle, which the heel strikes of a fast walk bias towards leaning back (1: the vector's alone); not given, the closed-loop engine's own (0: the angles')",
-    },
-    // The torso's lean held by both legs.
-    KnownParam {
-        param: Param::PitchHoldGain,
-        name: "pitch_hold_gain",
-        role: Role::Walk,
-        min: -5.0,
-        max: 5.0,
-        unit: "rad/(rad s)",
-        default: 0.0,
-        doc: "both legs' pitch per rad·s of the integrated excess of the torso's sensed pitch over pitch_hold_rad, on the hips and the ankles as pitch_hold_ankle shares it (capped at 0.4 rad; negative: a torso leaning back further is pitched forward); not given, the closed-loop engine's own (0: off)",
-    },
-    // The pitch the hold keeps.
-    KnownParam {
-        param: Param::PitchHold,
-        name: "pitch_hold_rad",
-        role: Role::Walk,
-        min: -0.5,
-        max: 0.5,
-        unit: "rad",
-        default: 0.0,
-        doc: "the torso pitch pitch_hold_gain holds, rad (negative: leaning back); not given, the closed-loop engine's own (0)",
-    },
-    // Where the hold acts.
-    KnownParam {
-        param: Param::PitchHoldAnkle,
-        name: "pitch_hold_ankle",
-        role: Role::Walk,
-        min: 0.0,
-        max: 1.0,
-        unit: "1",
-        default: 0.0,
-        doc: "the share of pitch_hold_gain's hold put on both ankles' pitch, the rest on both hips' (the same sign on each: 0.5 splits it evenly); not given, the closed-loop engine's own (0: the hips alone)",
-    },
-    // When step_aim reads a step.
-    KnownParam {
-        param: Param::StepAimBefore,
-        name: "step_aim_before",
-        role: Role::Walk,
-        min: 0.0,
-        max: 1.0,
-        unit: "1",
-        default: 0.0,
-        doc: "the share of step_aim's reading of the feet's spacing taken from the sensed joint angles of the cycle before the touchdown, while the other foot still carries, the rest from the touchdown's own cycle, by which the other foot may have begun its swing (1: the cycle before's alone); not given, the closed-loop engine's own (0: the touchdown's)",
+        default: 0.025,
+        doc: "the plan's centre of mass above the hip centre (the pendulum's height)",
     },
 ];
 

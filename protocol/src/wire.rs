@@ -10,29 +10,15 @@
 use serde::{de::DeserializeOwned, Deserialize, Serialize};
 
 use crate::{
-    experiment::{Physics, TrialModel, WalkEngine},
+    experiment::{Physics, TrialModel},
     measurement::Measurement,
 };
 
 /// Version of the envelope and message layout, and of what a message may
-/// carry: 5 since `step_period` and `double_support` joined the parameter
-/// registry (a grant of a run that sets them is one a version-4 decoder
-/// refuses, so a version-4 worker must not take part; it is not told apart by
-/// its fingerprint, whose probe bits are unchanged); 6 since `com_above_hip`,
-/// `hip_pitch_gain` and `ankle_pitch_gain` joined it, for the same reason; 7
-/// since a trial request's physics carries `contact_hz` and `firm_stops` (its
-/// body grew two fields, which a version-6 decoder reads as a malformed body);
-/// 8 since `hip_roll_comp` and `arm_swing` joined the registry; 9 since a
-/// trial request's physics carries `firm_stop_window_deg`; 10 since
-/// `turn_place` joined the registry; 11 since a trial request's physics
-/// carries `substeps_max`; 12 since `step_reach` joined the registry; 13
-/// since `step_aim` joined it; 14 since `lean_place` joined it; 15 since a
-/// trial request's physics carries `firm_stop_lookahead`; 16 since it
-/// carries `weld_elbow_yaws`; 17 since `hip_roll_rate_gain` joined the
-/// registry; 18 since `step_aim_heading` joined it; 19 since `tilt_vector`,
-/// `pitch_hold_gain`, `pitch_hold_rad` and `pitch_hold_ankle` joined it; 20
-/// since `step_aim_before` joined it.
-pub const WIRE_VERSION: u8 = 20;
+/// carry (the parameter registry's names and a trial request's physics):
+/// a decoder of another version refuses the message by its envelope, so
+/// workers of two builds never serve one run with different walks.
+pub const WIRE_VERSION: u8 = 21;
 /// Largest message accepted, in bytes (checked before any allocation).
 pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
 const MAGIC: [u8; 2] = *b"NF";
@@ -268,8 +254,6 @@ pub struct TrialRequest {
     pub dispatch: u64,
     /// How finely the NAO's physics integrates (the experiment's `[physics]`).
     pub physics: Physics,
-    /// The NAO's walk engine (the experiment's `walk`).
-    pub walk: WalkEngine,
 }
 
 impl WireMessage for TrialRequest {
@@ -840,14 +824,10 @@ mod tests {
         #[test]
         fn trial_request_round_trips(run in run(), i in any::<u64>(), k in any::<u32>(), seed in any::<u64>(),
                                      d in 0.1f64..100.0, ps in params(), t in 0u8..5, disp in any::<u64>(),
-                                     sub in 1u32..=50, its in 1u32..=16, pgs in 1u32..=200, arm in 0.0f64..0.1, hz in 10.0f64..10_000.0, firm in any::<bool>(),
-                                     window in 1.0f64..20.0, ahead in 0u32..=10, elbows in any::<bool>(), band in 0u32..=50, closed in any::<bool>()) {
-            // A band below the fixed count is refused (tested below): 0 then.
-            let band = if band < sub { 0 } else { band };
-            let physics = Physics { substeps: sub, solver_iterations: its, pgs_iterations: pgs, armature_kg_m2: arm, contact_hz: hz, firm_stops: firm, firm_stop_window_deg: window, firm_stop_lookahead: ahead, weld_elbow_yaws: elbows, substeps_max: band };
+                                     sub in 1u32..=50, its in 1u32..=16, pgs in 1u32..=200) {
+            let physics = Physics { substeps: sub, solver_iterations: its, pgs_iterations: pgs };
             let m = TrialRequest { run, iteration: i, trial: k, seed, model: TrialModel::Synthetic,
-                                   robot_type: t, duration_s: d, params: ps, dispatch: disp, physics,
-                                   walk: if closed { WalkEngine::ClosedLoop } else { WalkEngine::OpenLoop } };
+                                   robot_type: t, duration_s: d, params: ps, dispatch: disp, physics };
             prop_assert_eq!(TrialRequest::decode(&m.encode().unwrap()), Ok(m));
         }
 
@@ -1029,20 +1009,18 @@ mod tests {
             params: vec![("ThighRelHip2_Z".into(), 0.5)],
             dispatch: 0,
             physics: Physics::default(),
-            walk: WalkEngine::OpenLoop,
         };
         let e = TrialRequest::decode(&r.encode().unwrap())
             .unwrap_err()
             .to_string();
         assert!(e.contains("ThighRelHip2_Z"), "{e}");
-        // Physics out of range, each refused naming its field: no steps, and
-        // a band below its own bottom.
-        for (physics, field) in [((0, 0), "substeps"), ((20, 16), "substeps_max")] {
+        // Physics out of range, each refused naming its field.
+        for (physics, field) in [((0, 28), "substeps"), ((4, 0), "pgs_iterations")] {
             let r = TrialRequest {
                 params: vec![("ThighRelHip2_Z".into(), -0.04)],
                 physics: Physics {
                     substeps: physics.0,
-                    substeps_max: physics.1,
+                    pgs_iterations: physics.1,
                     ..Physics::default()
                 },
                 ..r.clone()

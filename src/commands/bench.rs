@@ -337,12 +337,9 @@ fn farm(a: &FarmBenchArgs) -> Result<(), Failure> {
 
 struct Row {
     label: String,
-    /// The experiment file's key, on a file's walk and on its open-loop twin.
-    file: Option<&'static str>,
     motion: &'static str,
     settings: SimSettings,
     sim_s: f64,
-    /// Physics steps taken: a banded file's row runs walks at several steps.
     steps: f64,
     wall_s: f64,
     /// CPU time of the measuring thread: unlike the wall time, it leaves
@@ -372,7 +369,6 @@ fn measure_stand(settings: SimSettings, seconds: f64) -> Result<Row, Failure> {
     }
     Ok(Row {
         label: String::new(),
-        file: None,
         motion: "stand",
         settings,
         sim_s: p.time_s,
@@ -383,26 +379,16 @@ fn measure_stand(settings: SimSettings, seconds: f64) -> Result<Row, Failure> {
     })
 }
 
-fn measure_walk(
-    settings: SimSettings,
-    seconds: f64,
-    walk: protocol::WalkEngine,
-    params: &ParamValues,
-) -> Result<Row, Failure> {
-    let engine = trial::Engine::of(walk);
-    // What the trial runs on (the arms free where the walk swings them).
-    let ran = trial::walk_settings(settings, &engine.gait.with_params(params));
+/// The expert set's walk (seed 1) on `settings`.
+fn measure_walk(settings: SimSettings, seconds: f64) -> Result<Row, Failure> {
+    let params = ParamValues::default();
     let (t0, cpu0) = (Instant::now(), thread_cpu_s());
-    let t = trial::run_observed(0, params, 1, seconds, settings, engine, &mut |_, _, _| {})
+    let t = trial::run(0, &params, 1, seconds, settings, trial::Engine::WALK)
         .map_err(|e| Failure::Job(e.into()))?;
     Ok(Row {
         label: String::new(),
-        file: None,
-        motion: match walk {
-            protocol::WalkEngine::OpenLoop => "walk",
-            protocol::WalkEngine::ClosedLoop => "walk-cl",
-        },
-        settings: ran,
+        motion: "walk",
+        settings,
         sim_s: t.measurement.sim_time_s,
         steps: t.measurement.sim_time_s / CYCLE_S * f64::from(settings.substeps),
         wall_s: t0.elapsed().as_secs_f64(),
@@ -411,179 +397,10 @@ fn measure_walk(
     })
 }
 
-/// A shipped experiment file whose walk `bench sim` measures beside the
-/// default, as the file sets it.
-struct FileWalk {
-    /// The file's text.
-    text: &'static str,
-    /// Its key in the JSON output (`{key}_realtime_factor`,
-    /// `{key}_share_of_open_loop`); with spaces for underscores, its name in
-    /// the summary lines and errors.
-    key: &'static str,
-    /// Its row's label.
-    label: &'static str,
-}
-
-impl FileWalk {
-    /// Its name in the summary lines and errors.
-    fn name(&self) -> String {
-        self.key.replace('_', " ")
-    }
-}
-
-/// The files `bench sim` measures, the converged first.
-const FILES: [FileWalk; 11] = [
-    // Converged physics with its fixed values.
-    FileWalk {
-        text: include_str!("../../experiments/physical-technical-converged.toml"),
-        key: "converged",
-        label: "converged files: 10x2ms, no double support",
-    },
-    // The farm's step with the contact problem solved further.
-    FileWalk {
-        text: include_str!("../../experiments/physical-technical-stiff.toml"),
-        key: "stiff",
-        label: "stiff file: 2x10ms, pgs 32, its engine",
-    },
-    // The farm's step with stops that hold within it.
-    FileWalk {
-        text: include_str!("../../experiments/physical-technical-firm.toml"),
-        key: "firm",
-        label: "firm file: 2x10ms, pgs 28, firm stops, 60Hz",
-    },
-    // The firm physics with the arms swinging (and so not welded).
-    FileWalk {
-        text: include_str!("../../experiments/physical-technical-arms.toml"),
-        key: "arms",
-        label: "arms file: the firm file's, arms swinging",
-    },
-    // The arms file at 4 x 5 ms.
-    FileWalk {
-        text: include_str!("../../experiments/physical-technical-arms-5ms.toml"),
-        key: "arms_5ms",
-        label: "arms 5 ms file: the arms file's at 4x5ms",
-    },
-    // The arms file at 4 x 5 ms with the stance hip's roll at 0.09 rad:
-    // the file that keeps every bound of the pace issue but the speed.
-    FileWalk {
-        text: include_str!("../../experiments/physical-technical-arms-5ms-roll.toml"),
-        key: "arms_5ms_roll",
-        label: "roll file: the arms 5 ms, hip roll 0.09",
-    },
-    // The roll file with its steps aimed and its feet placed against a
-    // forward lean, whose experiment 2 keeps every bound of the pace issue
-    // but the speed at every seed measured. Its expert walk is, to the bit,
-    // that of the capped file (`…-lean-reach.toml`: the steps
-    // capped at the legs' reach, which the expert's are within, and a stop
-    // row a step ahead, which none of its trials needs), so this row
-    // measures both.
-    FileWalk {
-        text: include_str!("../../experiments/physical-technical-arms-5ms-roll-aim-lean.toml"),
-        key: "arms_5ms_roll_aim_lean",
-        label: "lean file: the roll's, aimed, lean placed",
-    },
-    // The file README recommends: the capped file with the elbow yaws
-    // welded (no walk stands on their 5 ms swing), the stance hip's roll
-    // against the gyro's roll rate (the damp file's), and the steps read
-    // along the walk's heading, whose optima keep to their plan. The damp
-    // file's walk is the same but for one rotation a touchdown.
-    FileWalk {
-        text: include_str!(
-            "../../experiments/physical-technical-arms-5ms-roll-aim-lean-reach-damp-heading.toml"
-        ),
-        key: "arms_5ms_heading",
-        label: "heading file: damp, steps read along the heading",
-    },
-    // The heading file with the tilt read from gravity as a vector, the
-    // torso's lean held by both legs, and each step read before the other
-    // foot leaves: the file whose optima walk 6 m at every seed as planned
-    // (docs/walk.md, "Steps read before the other foot leaves").
-    FileWalk {
-        text: include_str!(
-            "../../experiments/physical-technical-arms-5ms-roll-aim-lean-reach-damp-heading-hold-before.toml"
-        ),
-        key: "arms_5ms_before",
-        label: "before file: heading, held, read before",
-    },
-    // The step-period file with each trial's step drawn from a band.
-    FileWalk {
-        text: include_str!("../../experiments/physical-technical-converged-period-band.toml"),
-        key: "band",
-        label: "band file: each of 16-30 steps per cycle",
-    },
-    // The band file with its steps capped at the legs' reach and aimed
-    // short by their overreach: the file whose optima keep every distance
-    // bound (docs/walk.md, "Steps aimed short by the legs' overreach").
-    FileWalk {
-        text: include_str!(
-            "../../experiments/physical-technical-converged-period-band-reach-aim.toml"
-        ),
-        key: "band_reach_aim",
-        label: "reach-aim file: the band's, capped, aimed",
-    },
-];
-
-/// The walk of a shipped experiment file, as the file sets it (its physics
-/// and its fixed values, with its expert set), measured like the others; or,
-/// with `open_loop`, the open loop's expert walk on that walk's physics (the
-/// file's steps, solver, contacts and stops, and the same joints welded), so
-/// that the two differ in the walk alone.
-/// A file with a band of steps walks once at each step of its band, and its
-/// row sums them: the farm's trials draw their steps uniformly from the
-/// band, so that is what a trial costs on average.
-fn measure_file_walk(f: &FileWalk, seconds: f64, open_loop: bool) -> Result<Row, Failure> {
-    let bad = |e: String| Failure::Job(anyhow!("the {} experiment file: {e}", f.name()));
-    let file = protocol::Experiment::from_toml(f.text).map_err(|e| bad(e.to_string()))?;
-    let params = ParamValues::from_named(&file.full_params(&file.expert_values()))
-        .map_err(|e| bad(e.to_string()))?;
-    let gait = trial::Engine::of(file.walk).gait.with_params(&params);
-    let settings = trial::walk_settings(SimSettings::with_physics(&file.physics), &gait);
-    let (walk, params) = if open_loop {
-        (protocol::WalkEngine::OpenLoop, ParamValues::default())
-    } else {
-        (file.walk, params)
-    };
-    let mut sum: Option<Row> = None;
-    for substeps in settings.substeps_band() {
-        let fixed = SimSettings {
-            substeps,
-            substeps_max: 0,
-            ..settings
-        };
-        let r = measure_walk(fixed, seconds, walk, &params)?;
-        sum = Some(match sum {
-            None => r,
-            Some(t) => Row {
-                sim_s: t.sim_s + r.sim_s,
-                steps: t.steps + r.steps,
-                wall_s: t.wall_s + r.wall_s,
-                cpu_s: t.cpu_s + r.cpu_s,
-                fell: t.fell || r.fell,
-                ..t
-            },
-        });
-    }
-    let mut r = sum.ok_or_else(|| bad("no physics steps".into()))?;
-    r.label = f.label.into();
-    r.file = Some(f.key);
-    // The band's steps, as the file gives them (each run had one of them).
-    r.settings = SimSettings {
-        substeps: settings.substeps,
-        substeps_max: settings.substeps_max,
-        ..r.settings
-    };
-    Ok(r)
-}
-
-/// One measurement of `bench sim`: a variant's motion, or a file's walk.
-enum Spec {
-    /// Label, settings and motion (`stand`, `walk`, `walk-cl`).
-    Variant(&'static str, SimSettings, &'static str),
-    /// A file's walk, or with `true` the open loop on its physics.
-    File(&'static FileWalk, bool),
-}
-
-/// `naofarm bench sim`: real-time factor and physics steps per second on one core.
+/// `naofarm bench sim`: real-time factor and physics steps per second on one
+/// core, of the shipped physics standing and walking, and of the walk at
+/// other step and solver counts (the `trial` knobs), each measurement in
+/// turn in every round.
 pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
     if !(a.seconds.is_finite() && a.seconds >= 1.0 && a.seconds <= 600.0) {
         return Err(Failure::Usage(anyhow!("--seconds must be in [1, 600]")));
@@ -592,214 +409,83 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
         return Err(Failure::Usage(anyhow!("--rounds must be in [1, 100]")));
     }
     let d = SimSettings::default();
-    let variants = [
-        ("default: 2x10ms, pgs 12, welded upper body", d),
+    let specs: Vec<(&str, SimSettings, &str)> = vec![
+        ("shipped: 4x5ms, 28 PGS", d, "stand"),
+        ("shipped: 4x5ms, 28 PGS", d, "walk"),
+        ("2x10ms, 28 PGS", SimSettings { substeps: 2, ..d }, "walk"),
+        ("8x2.5ms, 28 PGS", SimSettings { substeps: 8, ..d }, "walk"),
         (
-            "4x5ms, pgs 8, welded",
+            "4x5ms, 12 PGS",
             SimSettings {
-                substeps: 4,
-                pgs_iterations: 8,
+                pgs_iterations: 12,
                 ..d
             },
-        ),
-        (
-            "2x10ms, pgs 12, full 22 hinges",
-            SimSettings {
-                weld_upper_body: false,
-                ..d
-            },
-        ),
-        (
-            "2x10ms, pgs 12, 4 solver iterations",
-            SimSettings {
-                solver_iterations: 4,
-                ..d
-            },
-        ),
-        (
-            "1x20ms, pgs 40, welded",
-            SimSettings {
-                substeps: 1,
-                pgs_iterations: 40,
-                ..d
-            },
-        ),
-        (
-            "impulse joints, 2x10ms, pgs 12, welded",
-            SimSettings {
-                impulse_joints: true,
-                ..d
-            },
-        ),
-        (
-            "impulse joints, 4x5ms, 4 solver its",
-            SimSettings {
-                impulse_joints: true,
-                substeps: 4,
-                solver_iterations: 4,
-                ..d
-            },
-        ),
-        (
-            "impulse joints, 10x2ms, 8 solver its",
-            SimSettings {
-                impulse_joints: true,
-                substeps: 10,
-                solver_iterations: 8,
-                ..d
-            },
-        ),
-        (
-            "2x10ms, pgs 4, welded",
-            SimSettings {
-                pgs_iterations: 4,
-                ..d
-            },
+            "walk",
         ),
     ];
-    let expert = ParamValues::default();
-    // Every measurement, in the order of the table: the variants' three
-    // motions, then the files' walks.
-    let mut specs: Vec<Spec> = Vec::new();
-    for (label, s) in variants {
-        for motion in ["stand", "walk", "walk-cl"] {
-            specs.push(Spec::Variant(label, s, motion));
-        }
-    }
-    // Each file's walk, then at once its open-loop twin, so that the two
-    // meet the same spell of a shared machine; each file with the indices
-    // of the two measurements.
-    let mut files: Vec<(&FileWalk, usize, usize)> = Vec::new();
-    for f in &FILES {
-        files.push((f, specs.len(), specs.len() + 1));
-        specs.push(Spec::File(f, false));
-        specs.push(Spec::File(f, true));
-    }
     // Rounds of every measurement in turn: a slow spell of a shared
-    // machine then slows each row alike, and the ratios are per round.
+    // machine then slows each row alike.
     let mut runs: Vec<Vec<Row>> = specs.iter().map(|_| Vec::new()).collect();
     for _ in 0..a.rounds {
-        for (spec, run) in specs.iter().zip(&mut runs) {
-            let mut r = match *spec {
-                Spec::Variant(_, s, "stand") => measure_stand(s, a.seconds)?,
-                Spec::Variant(_, s, "walk") => {
-                    measure_walk(s, a.seconds, protocol::WalkEngine::OpenLoop, &expert)?
-                }
-                Spec::Variant(_, s, _) => {
-                    measure_walk(s, a.seconds, protocol::WalkEngine::ClosedLoop, &expert)?
-                }
-                Spec::File(f, open_loop) => measure_file_walk(f, a.seconds, open_loop)?,
+        for ((label, s, motion), run) in specs.iter().zip(&mut runs) {
+            let mut r = match *motion {
+                "stand" => measure_stand(*s, a.seconds)?,
+                _ => measure_walk(*s, a.seconds)?,
             };
-            match spec {
-                Spec::Variant(label, ..) => r.label = (*label).to_string(),
-                Spec::File(f, true) => r.label = format!("open loop, {} physics", f.name()),
-                Spec::File(_, false) => {}
-            }
+            r.label = (*label).to_string();
             run.push(r);
         }
     }
     let rtf = |r: &Row| r.sim_s / r.wall_s;
     let cpu_rtf = |r: &Row| r.sim_s / r.cpu_s;
-    let sps = |r: &Row| r.steps / r.wall_s;
-    // Each measurement's row of median real-time factor.
-    let rows: Vec<&Row> = runs
+    let sps = |r: &Row| r.steps / r.cpu_s;
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    // Each measurement's medians over the rounds: real time by the wall
+    // clock, and by the thread's CPU clock, and physics steps per CPU second.
+    let rows: Vec<(&Row, f64, f64, f64)> = runs
         .iter()
         .map(|run| {
-            let mut by_speed: Vec<&Row> = run.iter().collect();
-            by_speed.sort_by(|a, b| rtf(a).total_cmp(&rtf(b)));
-            by_speed[by_speed.len() / 2]
+            (
+                &run[0],
+                median(run.iter().map(rtf).collect()),
+                median(run.iter().map(cpu_rtf).collect()),
+                median(run.iter().map(sps).collect()),
+            )
         })
         .collect();
-    // Each measurement's median real-time factor by its thread's CPU clock.
-    let cpu: Vec<f64> = runs
-        .iter()
-        .map(|run| {
-            let mut f: Vec<f64> = run.iter().map(cpu_rtf).collect();
-            f.sort_by(f64::total_cmp);
-            f[f.len() / 2]
-        })
-        .collect();
-    let find = |motion: &str| {
-        rows.iter()
-            .position(|r| r.motion == motion && r.settings == d)
-            .ok_or_else(|| Failure::Job(anyhow!("no default {motion} row")))
-    };
-    let (headline, closed) = (find("walk")?, find("walk-cl")?);
-    let open_loop = headline;
-    // A measurement's speed against another's: the median over the rounds
-    // of the ratio within each round.
-    let share = |of: usize, to: usize, per: &dyn Fn(&Row) -> f64| {
-        let mut ratios: Vec<f64> = runs[of]
-            .iter()
-            .zip(&runs[to])
-            .map(|(a, b)| per(a) / per(b))
-            .collect();
-        ratios.sort_by(f64::total_cmp);
-        let spread = (ratios[0], ratios[ratios.len() - 1]);
-        (ratios[ratios.len() / 2], spread)
-    };
-    // The closed-loop walk's speed as a share of the open loop's, measured in
-    // the same rounds at the default settings.
-    let (closed_share, closed_spread) = share(closed, headline, &cpu_rtf);
-    let converged = files[0].1;
-    // What a physics step costs there against the default's: about the same,
-    // so the converged walk's share follows its steps per cycle (docs/walk.md,
-    // "Why no code speed-up meets the 80 % on converged physics").
-    let (converged_step_share, _) = share(converged, closed, &sps);
-    let (hi, ci) = (headline, closed);
-    let (headline, closed, converged) = (rows[headline], rows[closed], rows[converged]);
+    let shipped = rows[1];
     if a.json {
-        let mut v = serde_json::json!({
+        let v = serde_json::json!({
             "rounds": a.rounds,
-            "realtime_factor": rtf(headline),
-            "cpu_realtime_factor": cpu[hi],
-            "steps_per_second": sps(headline),
-            "motion": "expert walk, type 0, default settings, one core",
-            "shares_by": "the measuring thread's CPU clock",
-            "closed_loop_realtime_factor": rtf(closed),
-            "closed_loop_cpu_realtime_factor": cpu[ci],
-            "closed_loop_share_of_open_loop": closed_share,
-            "closed_loop_share_spread": [closed_spread.0, closed_spread.1],
-            "converged_steps_per_second_share": converged_step_share,
-            "rows": rows.iter().zip(&cpu).map(|(r, c)| serde_json::json!({
+            "motion": "expert walk, type 0, shipped physics, one core",
+            "realtime_factor": shipped.1,
+            "cpu_realtime_factor": shipped.2,
+            "steps_per_second": shipped.3,
+            "rows": rows.iter().map(|(r, wall, cpu, steps)| serde_json::json!({
                 "settings": r.label,
-                "file": r.file,
                 "motion": r.motion,
                 "substeps": r.settings.substeps,
-                "substeps_max": r.settings.substeps_max,
                 "solver_iterations": r.settings.solver_iterations,
                 "pgs_iterations": r.settings.pgs_iterations,
-                "weld_upper_body": r.settings.weld_upper_body,
-                "weld_head": r.settings.weld_head,
-                "contact_hz": r.settings.contact_hz,
-                "firm_stops": r.settings.firm_stops,
-                "realtime_factor": rtf(r),
-                "cpu_realtime_factor": c,
-                "steps_per_second": sps(r),
+                "realtime_factor": wall,
+                "cpu_realtime_factor": cpu,
+                "steps_per_second": steps,
                 "fell": r.fell,
                 "sim_s": r.sim_s,
             })).collect::<Vec<_>>(),
         });
-        for (f, i, t) in &files {
-            let (of_open, spread) = share(*i, open_loop, &cpu_rtf);
-            let (of_twin, twin_spread) = share(*i, *t, &cpu_rtf);
-            v[format!("{}_realtime_factor", f.key)] = rtf(rows[*i]).into();
-            v[format!("{}_cpu_realtime_factor", f.key)] = cpu[*i].into();
-            v[format!("{}_share_of_open_loop", f.key)] = of_open.into();
-            v[format!("{}_share_spread", f.key)] = serde_json::json!([spread.0, spread.1]);
-            v[format!("{}_share_of_open_loop_on_its_physics", f.key)] = of_twin.into();
-            v[format!("{}_share_on_its_physics_spread", f.key)] =
-                serde_json::json!([twin_spread.0, twin_spread.1]);
-        }
         outln!("{v}");
     } else {
         outln!(
             "medians of {} rounds, each measurement in turn in every round; \
-             realtime× by the wall clock and by the thread's CPU clock, shares by CPU",
+             realtime× by the wall clock and by the thread's CPU clock, steps per CPU second",
             a.rounds
         );
         outln!(
-            "{:<44} {:>7} {:>10} {:>10} {:>12} {:>6}",
+            "{:<28} {:>7} {:>10} {:>10} {:>12} {:>6}",
             "settings",
             "motion",
             "realtime×",
@@ -807,48 +493,16 @@ pub fn bench_sim(a: &SimBenchArgs) -> Result<(), Failure> {
             "steps/s",
             "fell"
         );
-        for (r, c) in rows.iter().copied().zip(&cpu) {
+        for (r, wall, cpu, steps) in &rows {
             outln!(
-                "{:<44} {:>7} {:>10.1} {:>10.1} {:>12.0} {:>6}",
+                "{:<28} {:>7} {:>10.1} {:>10.1} {:>12.0} {:>6}",
                 r.label,
                 r.motion,
-                rtf(r),
-                c,
-                sps(r),
+                wall,
+                cpu,
+                steps,
                 r.fell
             );
-        }
-        outln!(
-            "closed-loop walk at the default settings: {:.1}x real time ({:.1}x by CPU), {:.0} % of the open loop's ({:.0}–{:.0} % over the rounds)",
-            rtf(closed),
-            cpu[ci],
-            100.0 * closed_share,
-            100.0 * closed_spread.0,
-            100.0 * closed_spread.1
-        );
-        for (f, i, t) in &files {
-            let (of_open, spread) = share(*i, open_loop, &cpu_rtf);
-            let (of_twin, twin_spread) = share(*i, *t, &cpu_rtf);
-            outln!(
-                "closed-loop walk of the {} experiment: {:.1}x real time ({:.1}x by CPU), {:.0} % of the open loop's at the default ({:.0}–{:.0} %), {:.0} % of the open loop's on its physics ({:.0}–{:.0} %)",
-                f.name(),
-                rtf(rows[*i]),
-                cpu[*i],
-                100.0 * of_open,
-                100.0 * spread.0,
-                100.0 * spread.1,
-                100.0 * of_twin,
-                100.0 * twin_spread.0,
-                100.0 * twin_spread.1
-            );
-            if f.key == "converged" {
-                outln!(
-                    "  per physics step: {:.2}x the default closed loop's steps/s, with {} steps per cycle against {}",
-                    converged_step_share,
-                    converged.settings.substeps,
-                    closed.settings.substeps
-                );
-            }
         }
     }
     Ok(())

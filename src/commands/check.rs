@@ -17,12 +17,11 @@ pub fn check(path: &Path, json: bool) -> Result<(), Failure> {
         return Ok(());
     }
     outln!(
-        "experiment `{}` (seed {}, model {:?}, robot type {}, walk {}, start {:?})",
+        "experiment `{}` (seed {}, model {:?}, robot type {}, start {:?})",
         e.name,
         e.seed,
         e.model,
         e.robot_type,
-        e.walk.name(),
         e.start
     );
     outln!(
@@ -52,9 +51,6 @@ pub fn check(path: &Path, json: bool) -> Result<(), Failure> {
     if e.model == protocol::experiment::TrialModel::Nao {
         outln!("  physics: {}", e.physics);
         for (_, note) in crate::common::type_overrides(&e, e.robot_type) {
-            outln!("  note: {note}");
-        }
-        if let Some(note) = crate::common::toe_note(e.robot_type, e.walk, &e.physics) {
             outln!("  note: {note}");
         }
     }

@@ -18,6 +18,9 @@ use worker::nao::{footwork::Footwork, sim::SimSettings, trial};
 use crate::common::{note_tail, Failure};
 use crate::render;
 
+mod figures;
+use figures::{best_figure, decisions_figure, pair_figure, parameter_figure, progress_figure};
+
 /// The first seed of Table IV's trials (the seed of the paper's table runs).
 pub const TABLE_SEED: u64 = 777;
 const SIZE: (u32, u32) = (720, 360);
@@ -247,239 +250,6 @@ fn simspark_types(exp: &Experiment, rows: &[Row]) -> Result<String, Failure> {
     Ok(text)
 }
 
-/// The colour and fill of a decision's points: ACCEPT white with a dark
-/// edge, EQUIVALENT grey, REJECT black (the paper's Fig. 1).
-fn style(d: Decision) -> ShapeStyle {
-    match d {
-        Decision::Accept => BLACK.stroke_width(1),
-        Decision::Equivalent => GREY.filled(),
-        Decision::Reject => BLACK.filled(),
-    }
-}
-
-fn range(lo: f64, hi: f64) -> std::ops::Range<f64> {
-    if hi > lo {
-        lo..hi
-    } else {
-        lo - 1.0..lo + 1.0
-    }
-}
-
-/// One SVG document from a drawing closure.
-fn svg(
-    draw: impl FnOnce(&DrawingArea<SVGBackend<'_>, plotters::coord::Shift>) -> anyhow::Result<()>,
-) -> anyhow::Result<String> {
-    let mut text = String::new();
-    {
-        let root = SVGBackend::with_string(&mut text, SIZE).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
-        draw(&root)?;
-        root.present().map_err(|e| anyhow!("{e}"))?;
-    }
-    Ok(text)
-}
-
-fn e<E: std::fmt::Display>(err: E) -> anyhow::Error {
-    anyhow!("drawing: {err}")
-}
-
-/// Parameter `i` against the iteration, one point per decided iteration,
-/// ν′'s value as a line.
-fn parameter_figure(
-    exp: &Experiment,
-    decided: &[DecidedIteration],
-    i: usize,
-) -> anyhow::Result<String> {
-    let p = &exp.parameter[i];
-    let n = decided.last().map_or(1, |d| d.iteration + 1) as f64;
-    svg(|root| {
-        let mut chart = ChartBuilder::on(root)
-            .caption(&p.name, ("sans-serif", 18))
-            .margin(10)
-            .x_label_area_size(35)
-            .y_label_area_size(60)
-            .build_cartesian_2d(0.0..n, range(p.lower, p.upper))
-            .map_err(e)?;
-        chart
-            .configure_mesh()
-            .x_desc("iteration")
-            .y_desc(&p.name)
-            .draw()
-            .map_err(e)?;
-        let best: Vec<(f64, f64)> = decided
-            .iter()
-            .filter_map(|d| d.best.as_ref().map(|b| (d.iteration as f64, b.params[i])))
-            .collect();
-        chart
-            .draw_series(LineSeries::new(best, BLUE.stroke_width(2)))
-            .map_err(e)?;
-        chart
-            .draw_series(
-                decided
-                    .iter()
-                    .map(|d| Circle::new((d.iteration as f64, d.params[i]), 3, style(d.decision))),
-            )
-            .map_err(e)?;
-        Ok(())
-    })
-}
-
-/// Parameter `j` against parameter `i`, coloured by decision.
-fn pair_figure(
-    exp: &Experiment,
-    decided: &[DecidedIteration],
-    i: usize,
-    j: usize,
-) -> anyhow::Result<String> {
-    let (a, b) = (&exp.parameter[i], &exp.parameter[j]);
-    svg(|root| {
-        let mut chart = ChartBuilder::on(root)
-            .caption(format!("{} against {}", b.name, a.name), ("sans-serif", 18))
-            .margin(10)
-            .x_label_area_size(35)
-            .y_label_area_size(60)
-            .build_cartesian_2d(range(a.lower, a.upper), range(b.lower, b.upper))
-            .map_err(e)?;
-        chart
-            .configure_mesh()
-            .x_desc(&a.name)
-            .y_desc(&b.name)
-            .draw()
-            .map_err(e)?;
-        chart
-            .draw_series(
-                decided
-                    .iter()
-                    .map(|d| Circle::new((d.params[i], d.params[j]), 3, style(d.decision))),
-            )
-            .map_err(e)?;
-        Ok(())
-    })
-}
-
-/// Decisions per 50 iterations, stacked: REJECT (black) at the bottom, then
-/// EQUIVALENT (grey), then ACCEPT (white, dark edge).
-fn decisions_figure(decided: &[DecidedIteration]) -> anyhow::Result<String> {
-    let blocks = decided.chunks(50).collect::<Vec<_>>();
-    let counts: Vec<[u32; 3]> = blocks
-        .iter()
-        .map(|b| {
-            let c = |d| b.iter().filter(|x| x.decision == d).count() as u32;
-            [
-                c(Decision::Reject),
-                c(Decision::Equivalent),
-                c(Decision::Accept),
-            ]
-        })
-        .collect();
-    svg(|root| {
-        let mut chart = ChartBuilder::on(root)
-            .caption("decisions per 50 iterations", ("sans-serif", 18))
-            .margin(10)
-            .x_label_area_size(35)
-            .y_label_area_size(40)
-            .build_cartesian_2d(0.0..(blocks.len().max(1) * 50) as f64, 0.0..50.0)
-            .map_err(e)?;
-        chart
-            .configure_mesh()
-            .x_desc("iteration (REJECT black, EQUIVALENT grey, ACCEPT white)")
-            .y_desc("decisions")
-            .draw()
-            .map_err(e)?;
-        for (k, c) in counts.iter().enumerate() {
-            let x0 = (k * 50) as f64 + 4.0;
-            let x1 = x0 + 42.0;
-            let mut y = 0.0;
-            // A decision not taken in a block draws no bar (a bar of no
-            // height is invalid SVG to a renderer).
-            for (n, fill) in c.iter().zip([BLACK, GREY, WHITE]) {
-                if *n == 0 {
-                    continue;
-                }
-                let top = y + f64::from(*n);
-                let edge = Rectangle::new([(x0, y), (x1, top)], BLACK.stroke_width(1));
-                chart
-                    .draw_series([Rectangle::new([(x0, y), (x1, top)], fill.filled()), edge])
-                    .map_err(e)?;
-                y = top;
-            }
-        }
-        Ok(())
-    })
-}
-
-type Chart<'a, 'b> = ChartContext<
-    'a,
-    SVGBackend<'b>,
-    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
->;
-
-/// Metres (0..top) against the iteration (0..n), with its mesh.
-fn metres_chart<'a, 'b>(
-    root: &'a DrawingArea<SVGBackend<'b>, plotters::coord::Shift>,
-    caption: &str,
-    n: f64,
-    top: f64,
-) -> anyhow::Result<Chart<'a, 'b>> {
-    let mut chart = ChartBuilder::on(root)
-        .caption(caption, ("sans-serif", 18))
-        .margin(10)
-        .x_label_area_size(35)
-        .y_label_area_size(50)
-        .build_cartesian_2d(0.0..n, 0.0..top)
-        .map_err(e)?;
-    chart
-        .configure_mesh()
-        .x_desc("iteration")
-        .y_desc("m")
-        .draw()
-        .map_err(e)?;
-    Ok(chart)
-}
-
-/// mx of every iteration (points by decision; a fallen-only iteration at 0),
-/// s (green line, right scale ×5 m) and ν′'s mx (blue line).
-fn progress_figure(decided: &[DecidedIteration]) -> anyhow::Result<String> {
-    let n = decided.last().map_or(1, |d| d.iteration + 1) as f64;
-    let top = decided
-        .iter()
-        .filter_map(|d| d.stats.mx)
-        .fold(1.0f64, f64::max)
-        * 1.1;
-    svg(|root| {
-        let mut chart = metres_chart(root, "mx (points), s × max (green), ν′'s mx (blue)", n, top)?;
-        chart
-            .draw_series(LineSeries::new(
-                decided
-                    .iter()
-                    .map(|d| (d.iteration as f64, d.stats.s * top)),
-                GREEN.stroke_width(1),
-            ))
-            .map_err(e)?;
-        chart
-            .draw_series(LineSeries::new(
-                decided.iter().filter_map(|d| {
-                    d.best
-                        .as_ref()
-                        .and_then(|b| b.stats.mx)
-                        .map(|mx| (d.iteration as f64, mx))
-                }),
-                BLUE.stroke_width(2),
-            ))
-            .map_err(e)?;
-        chart
-            .draw_series(decided.iter().map(|d| {
-                Circle::new(
-                    (d.iteration as f64, d.stats.mx.unwrap_or(0.0)),
-                    2,
-                    style(d.decision),
-                )
-            }))
-            .map_err(e)?;
-        Ok(())
-    })
-}
-
 /// Expert, Optim.1 (ν′) and Optim.2 (CLOP's mean), each over the same
 /// `trials` seeds from [`TABLE_SEED`], each trial exactly as a farm worker
 /// runs it.
@@ -529,7 +299,6 @@ fn table_request(exp: &Experiment, params: &[f64], k: u32) -> TrialRequest {
         params: exp.full_params(params),
         dispatch: 0,
         physics: exp.physics,
-        walk: exp.walk,
     }
 }
 
@@ -625,12 +394,11 @@ fn table_text(exp: &Experiment, rows: &[Row], trials: u32) -> (String, String) {
         String::new()
     };
     let mut md = format!(
-        "Table IV of {} ({} trials each, seeds {}–{}, walk {}{physics})\n\n| | {} |\n|---|{}\n",
+        "Table IV of {} ({} trials each, seeds {}–{}{physics})\n\n| | {} |\n|---|{}\n",
         exp.name,
         trials,
         TABLE_SEED,
         TABLE_SEED + u64::from(trials) - 1,
-        exp.walk.name(),
         rows.iter().map(|r| r.name).collect::<Vec<_>>().join(" | "),
         "---|".repeat(rows.len())
     );
@@ -701,7 +469,6 @@ fn table_text(exp: &Experiment, rows: &[Row], trials: u32) -> (String, String) {
         "experiment": exp.name,
         "seed0": TABLE_SEED,
         "trials": trials,
-        "walk": exp.walk.name(),
         "physics": nao.then_some(exp.physics),
         "fixed": exp.fixed,
         "columns": json,
@@ -814,14 +581,13 @@ fn index_html(
          <style>body{{font-family:sans-serif;max-width:1500px;margin:1em auto}}\
          table{{border-collapse:collapse}}td,th{{border:1px solid #aaa;padding:2px 8px;text-align:right}}\
          figure{{display:inline-block;margin:4px;vertical-align:top}}img{{width:720px;height:360px}}img.replay{{width:auto;height:auto;max-width:1400px}}</style>\
-         </head><body>\n<h1>{name}</h1>\n<p>run id {id}, seed {seed}, robot type {ty}, walk {walk}, \
+         </head><body>\n<h1>{name}</h1>\n<p>run id {id}, seed {seed}, robot type {ty}, \
          model {model:?}; {n} of {planned} iterations decided × {tpi} trials of {dur} s: \
          {a} ACCEPT, {q} EQUIVALENT, {r} REJECT.</p>\n{setup}<p class=\"wall\">{wall}</p>\n",
         name = escape(&exp.name),
         id = escape(view.id.as_deref().unwrap_or("–")),
         seed = exp.seed,
         ty = exp.robot_type,
-        walk = exp.walk.name(),
         model = exp.model,
         n = view.decided.len(),
         planned = exp.iterations,
@@ -938,56 +704,9 @@ fn replay_svg(exp: &Experiment, params: &[f64], title: &str) -> Result<String, F
         params: &named,
         values: &values,
         settings: SimSettings::with_physics(&exp.physics),
-        engine: trial::Engine::of(exp.walk),
+        engine: trial::Engine::WALK,
     };
     render::trial_svg(&what, title).map_err(|e| Failure::Job(anyhow!("{title}'s replay: {e}")))
-}
-
-/// ν′'s mx over the iterations, one line per run.
-fn best_figure(found: &[Found]) -> anyhow::Result<String> {
-    let n = found
-        .iter()
-        .filter_map(|f| f.view.decided.last().map(|d| d.iteration + 1))
-        .max()
-        .unwrap_or(1) as f64;
-    let top = found
-        .iter()
-        .flat_map(|f| f.view.decided.iter())
-        .filter_map(|d| d.best.as_ref().and_then(|b| b.stats.mx))
-        .fold(1.0f64, f64::max)
-        * 1.1;
-    svg(|root| {
-        let mut chart = metres_chart(root, "ν′'s mx over the iterations", n, top)?;
-        for (k, f) in found.iter().enumerate() {
-            let colour = Palette99::pick(k).to_rgba();
-            let label = format!(
-                "{k}: {} seed {}",
-                f.view.experiment.name, f.view.experiment.seed
-            );
-            chart
-                .draw_series(LineSeries::new(
-                    f.view.decided.iter().filter_map(|d| {
-                        d.best
-                            .as_ref()
-                            .and_then(|b| b.stats.mx)
-                            .map(|mx| (d.iteration as f64, mx))
-                    }),
-                    colour.stroke_width(2),
-                ))
-                .map_err(e)?
-                .label(label)
-                .legend(move |(x, y)| {
-                    PathElement::new([(x, y), (x + 16, y)], colour.stroke_width(2))
-                });
-        }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(e)?;
-        Ok(())
-    })
 }
 
 /// The page over several runs: each run's facts, Table IV row, converged
@@ -1003,7 +722,7 @@ fn runs_html(found: &[Found], out: &Path, trials: u32) -> String {
     let _ = writeln!(
         h,
         "<h2>Table IV rows</h2><p>{trials} trials per column from seed {TABLE_SEED}.</p>\
-         <table><tr><th>run</th><th>experiment</th><th>seed</th><th>type</th><th>walk</th><th>set-up</th>\
+         <table><tr><th>run</th><th>experiment</th><th>seed</th><th>type</th><th>set-up</th>\
          <th>decided</th><th>wall time</th><th>Expert s / mx</th><th>Optim.1 s / mx</th><th>Optim.2 s / mx</th>\
          <th>Optim.1 / Expert</th><th>Optim.2 / Expert</th></tr>"
     );
@@ -1029,11 +748,10 @@ fn runs_html(found: &[Found], out: &Path, trials: u32) -> String {
         let _ = writeln!(
             h,
             "<tr><td><a href=\"{link}\">{k}</a></td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>\
-             <td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+             <td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
             escape(&exp.name),
             exp.seed,
             exp.robot_type,
-            exp.walk.name(),
             escape(&setup_text(exp).unwrap_or_else(|| "–".into())),
             f.view.decided.len(),
             f.view

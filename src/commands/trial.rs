@@ -6,7 +6,6 @@ use std::time::Instant;
 use anyhow::anyhow;
 use protocol::{
     measurement::Measurement, params::ParamValues, pickout::stats, Experiment, TrialModel,
-    WalkEngine,
 };
 use worker::nao::{
     footwork::Footwork,
@@ -69,7 +68,7 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         }
     }
     let values = ParamValues::from_named(&params).map_err(|e| Failure::Usage(e.into()))?;
-    let model = NaoModel::with_params(robot_type, &values).map_err(|e| Failure::Usage(e.into()))?;
+    NaoModel::with_params(robot_type, &values).map_err(|e| Failure::Usage(e.into()))?;
     if a.threads.is_some_and(|t| t == 0 || t > 1024) {
         return Err(Failure::Usage(anyhow!("--threads must be in 1..=1024")));
     }
@@ -81,48 +80,17 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         substeps: a.substeps.unwrap_or(d.substeps),
         solver_iterations: a.solver_iterations.unwrap_or(d.solver_iterations),
         pgs_iterations: a.pgs_iterations.unwrap_or(d.pgs_iterations),
-        armature_kg_m2: a.armature.unwrap_or(d.armature_kg_m2),
-        contact_hz: a.contact_hz.unwrap_or(d.contact_hz),
-        firm_stops: a.firm_stops.unwrap_or(d.firm_stops),
-        firm_stop_window_deg: a.firm_stop_window_deg.unwrap_or(d.firm_stop_window_deg),
-        firm_stop_lookahead: a.firm_stop_lookahead.unwrap_or(d.firm_stop_lookahead),
-        weld_elbow_yaws: a.weld_elbow_yaws.unwrap_or(d.weld_elbow_yaws),
-        // --substeps alone asks for that step, not the file's band.
-        substeps_max: a.substeps_max.unwrap_or(if a.substeps.is_some() {
-            0
-        } else {
-            d.substeps_max
-        }),
     };
     physics.validate().map_err(|(field, m)| {
         let flag = field.trim_end_matches("_kg_m2").replace('_', "-");
         Failure::Usage(anyhow!("--{flag}: {m}"))
     })?;
-    let mut settings = SimSettings::with_physics(&physics);
-    for kv in &a.limit {
-        move_limit(&mut settings, &model, kv)?;
-    }
-    let walk = match (&a.walk, &exp) {
-        (Some(w), _) => WalkEngine::parse(w).map_err(|m| Failure::Usage(anyhow!("--walk: {m}")))?,
-        (None, Some(e)) => e.walk,
-        (None, None) => WalkEngine::OpenLoop,
+    let settings = SimSettings::with_physics(&physics);
+    let engine = if a.no_feedback {
+        trial::Engine::WALK.without_feedback()
+    } else {
+        trial::Engine::WALK
     };
-    for (name, _) in &params {
-        protocol::experiment::gain_has_feedback(walk, name)
-            .map_err(|m| Failure::Usage(anyhow!("--param {m}")))?;
-    }
-    if let Some(note) = crate::common::toe_note(robot_type, walk, &physics) {
-        eprintln!("note: {note}");
-    }
-    let mut engine = trial::Engine::of(walk);
-    for kv in &a.engine {
-        let (k, v) = kv
-            .split_once('=')
-            .ok_or_else(|| Failure::Usage(anyhow!("--engine `{kv}`: expected KEY=VALUE")))?;
-        engine = engine
-            .with(k, v)
-            .map_err(|m| Failure::Usage(anyhow!("--engine: {m}")))?;
-    }
     let first = Replayed {
         robot_type,
         seed: a.seed,
@@ -173,7 +141,7 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
             "set": crate::common::set_key(&a.set),
             "params": params_json(&params),
             "robot_type": robot_type,
-            "walk": engine.name(),
+            "feedback": engine.feedback,
             "duration_s": duration,
             "physics": physics,
             "s": s.s,
@@ -218,17 +186,10 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
         if step < asked {
             outln!(
                 "the walk's plan: {planned:.3} m, in steps of {step:.4} m \
-                 (xlength_step_max {asked:.4} m, capped by step_reach)"
+                 (xlength_step_max {asked:.4} m, capped at the legs' reach)"
             );
         } else {
             outln!("the walk's plan: {planned:.3} m, in steps of {step:.4} m");
-        }
-        if step > reach && engine.gait.with_params(&values).step_reach == 0.0 {
-            outln!(
-                "the plan's step is beyond the legs' reach ({reach:.4} m in a step at the \
-                 hip pitch's speed cap): such a walk may fall short of its plan, and far \
-                 beyond the reach go backward; `--param step_reach=1` caps the step there"
-            );
         }
         if let Some(w) = &split {
             outln!(
@@ -385,7 +346,7 @@ fn replay(a: &TrialArgs, dir: &std::path::Path, iteration: u64, k: u32) -> Resul
             params: &req.params,
             values: &values,
             settings: SimSettings::with_physics(&req.physics),
-            engine: trial::Engine::of(req.walk),
+            engine: trial::Engine::WALK,
         };
         if let Some(path) = &a.record {
             record(path, &what)?;
@@ -586,57 +547,5 @@ fn render(path: &std::path::Path, what: &Replayed<'_>, title: &str) -> Result<()
     std::fs::write(path, svg)
         .map_err(|e| Failure::Usage(anyhow!("--render {}: {e}", path.display())))?;
     eprintln!("rendered seed {} to {}", what.seed, path.display());
-    Ok(())
-}
-
-/// `--limit KEY=VALUE`: moves one of the robot's physical limits in
-/// `settings` (joints named as in `model`, the trial's own), to measure
-/// which limit stops a walk (docs/walk.md).
-fn move_limit(settings: &mut SimSettings, model: &NaoModel, kv: &str) -> Result<(), Failure> {
-    let bad = || {
-        Failure::Usage(anyhow!(
-            "--limit `{kv}`: expected KEY=VALUE, VALUE a positive number"
-        ))
-    };
-    let (k, v) = kv.split_once('=').ok_or_else(bad)?;
-    if k == "speed_cap_joints" {
-        // Joints by name suffix, comma-separated (`le3,le4`: both hips'
-        // pitch and both knees): the speed cap's scale applies to them only.
-        for suffix in v.split(',') {
-            let joints: Vec<usize> = (0..model.joints.len().min(64))
-                .filter(|j| model.joints[*j].name.ends_with(suffix))
-                .collect();
-            if joints.is_empty() {
-                return Err(Failure::Usage(anyhow!(
-                    "--limit `{kv}`: no joint ends with `{suffix}`"
-                )));
-            }
-            for j in joints {
-                settings.speed_cap_joints |= 1 << j;
-            }
-        }
-        return Ok(());
-    }
-    let v: f64 = v
-        .parse()
-        .ok()
-        .filter(|v: &f64| v.is_finite() && *v > 0.0)
-        .ok_or_else(bad)?;
-    match k {
-        "speed_cap_scale" => settings.speed_cap_scale = v.min(100.0),
-        "max_torque_nm" => settings.max_torque_nm = v.min(1000.0),
-        "contact_hz" => settings.contact_hz = v.min(10_000.0),
-        "contact_prediction_m" => settings.contact_prediction_m = v.min(0.1),
-        "friction_scale" => settings.friction_scale = v.min(100.0),
-        "weld_arm_rest" if v == 1.0 => settings.weld_arm_rest = true,
-        "friction_in_bias_pass" if v == 1.0 => settings.friction_in_bias_pass = true,
-        _ => {
-            return Err(Failure::Usage(anyhow!(
-                "--limit: unknown limit `{kv}` (speed_cap_scale, speed_cap_joints, \
-                 max_torque_nm, contact_hz, contact_prediction_m, friction_scale, \
-                 weld_arm_rest=1, friction_in_bias_pass=1)"
-            )))
-        }
-    }
     Ok(())
 }

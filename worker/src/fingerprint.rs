@@ -8,47 +8,34 @@
 
 use std::sync::OnceLock;
 
-use protocol::{Physics, TrialModel, TrialRequest, WalkEngine};
+use protocol::{Physics, TrialModel, TrialRequest};
 use sha3::{Digest, Sha3_256};
 
 /// `NAOFARM_FAULT_FINGERPRINT=1` (a test hook, switched on at run time): the
 /// worker reports another fingerprint, as a worker of another build would.
 pub const FINGERPRINT_FAULT_VAR: &str = "NAOFARM_FAULT_FINGERPRINT";
 
-/// The probe trials: the expert NAO on each walk engine for 3 simulated
-/// seconds at the default physics; the closed loop on type 4, whose toes
-/// have physics of their own (`nao::sim::TOE_STOP_WINDOW_DEG`), and on the
-/// firm file's physics, the vendored rapier's stops; and the synthetic
-/// model.
+/// The probe trials: the expert NAO walking for 3 simulated seconds on
+/// type 0 and on type 4, whose toes have joints of their own, and the
+/// synthetic model.
 fn probes() -> Vec<TrialRequest> {
-    let req = |model, walk, duration_s| TrialRequest {
+    let req = |model, robot_type, duration_s| TrialRequest {
         run: "probe".into(),
         iteration: 0,
         trial: 0,
         seed: 0x6e61_6f66_6172_6d00,
         model,
-        robot_type: 0,
+        robot_type,
         duration_s,
         params: vec![],
         dispatch: 0,
         physics: Physics::default(),
-        walk,
     };
-    let mut v: Vec<TrialRequest> = WalkEngine::ALL
-        .iter()
-        .map(|(_, w)| req(TrialModel::Nao, *w, 3.0))
-        .collect();
-    let closed = req(TrialModel::Nao, WalkEngine::ClosedLoop, 3.0);
-    v.push(TrialRequest {
-        robot_type: 4,
-        ..closed.clone()
-    });
-    v.push(TrialRequest {
-        physics: Physics::firm(),
-        ..closed
-    });
-    v.push(req(TrialModel::Synthetic, WalkEngine::default(), 10.0));
-    v
+    vec![
+        req(TrialModel::Nao, 0, 3.0),
+        req(TrialModel::Nao, 4, 3.0),
+        req(TrialModel::Synthetic, 0, 10.0),
+    ]
 }
 
 /// Computes the fingerprint (about 0.1 s of CPU: the probes are real trials).
@@ -105,9 +92,7 @@ mod tests {
         })
         .unwrap();
         assert_ne!(a.x_m.to_bits(), b.x_m.to_bits());
-        // Type 4's toes and the firm stops run code that type 0 at the
-        // default physics never reaches: each has a probe.
+        // Type 4's toes run code that type 0 never reaches: they have a probe.
         assert!(probes().iter().any(|p| p.robot_type == 4));
-        assert!(probes().iter().any(|p| p.physics.firm_stops));
     }
 }

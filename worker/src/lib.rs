@@ -48,7 +48,7 @@ pub fn planned_x_m(req: &TrialRequest) -> Result<Option<f64>, TrialError> {
             req.robot_type,
             &params,
             req.duration_s,
-            nao::trial::Engine::of(req.walk),
+            nao::trial::Engine::WALK,
         )
         .map(Some)
         .map_err(|e| TrialError::Model(e.to_string())),
@@ -63,7 +63,7 @@ pub fn planned_step_m(req: &TrialRequest) -> Result<Option<f64>, TrialError> {
     match req.model {
         TrialModel::Synthetic => Ok(None),
         TrialModel::Nao => {
-            nao::trial::planned_step_m(req.robot_type, &params, nao::trial::Engine::of(req.walk))
+            nao::trial::planned_step_m(req.robot_type, &params, nao::trial::Engine::WALK)
                 .map(Some)
                 .map_err(|e| TrialError::Model(e.to_string()))
         }
@@ -90,7 +90,7 @@ pub fn run_trial_with_footwork(
                 req.seed,
                 req.duration_s,
                 nao::sim::SimSettings::with_physics(&req.physics),
-                nao::trial::Engine::of(req.walk),
+                nao::trial::Engine::WALK,
             )
             .map_err(|e| TrialError::Model(e.to_string()))?;
             Ok((t.measurement, Some(t.footwork)))
@@ -115,7 +115,6 @@ mod tests {
             params: vec![],
             dispatch: 0,
             physics,
-            walk: protocol::WalkEngine::OpenLoop,
         }
     }
 
@@ -133,14 +132,13 @@ mod tests {
         );
         let coarse = run_trial(&request(d)).unwrap();
         assert_eq!(coarse, run_trial(&request(d)).unwrap());
-        let fine = run_trial(&request(Physics { substeps: 4, ..d })).unwrap();
+        let fine = run_trial(&request(Physics { substeps: 5, ..d })).unwrap();
         assert_ne!(coarse.x_m.to_bits(), fine.x_m.to_bits());
-        assert_eq!(d.armature_kg_m2, s.armature_kg_m2);
-        let geared = run_trial(&request(Physics {
-            armature_kg_m2: 0.005,
+        let stiff = run_trial(&request(Physics {
+            pgs_iterations: 40,
             ..d
         }))
         .unwrap();
-        assert_ne!(coarse.x_m.to_bits(), geared.x_m.to_bits());
+        assert_ne!(coarse.x_m.to_bits(), stiff.x_m.to_bits());
     }
 }

@@ -75,10 +75,7 @@ impl WorkerConfig {
                 req.duration_s, self.max_duration_s
             ));
         }
-        // A band's trials may draw up to its top.
-        let most = *crate::nao::sim::SimSettings::with_physics(&req.physics)
-            .substeps_band()
-            .end();
+        let most = req.physics.substeps;
         if most > self.max_substeps {
             return Some(format!(
                 "{most} physics substeps are beyond this worker's limit of {}",
@@ -468,7 +465,7 @@ pub async fn serve(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use protocol::{wire::RunState, Physics, WalkEngine};
+    use protocol::{wire::RunState, Physics};
 
     fn trial(k: u32, params: Vec<(String, f64)>) -> TrialRequest {
         TrialRequest {
@@ -482,7 +479,6 @@ mod tests {
             params,
             dispatch: 9,
             physics: Physics::default(),
-            walk: WalkEngine::OpenLoop,
         }
     }
 
@@ -522,26 +518,23 @@ mod tests {
         assert!(read_grant(b"not a grant").is_err());
     }
 
-    /// A worker limited to 20 physics steps per cycle refuses a trial whose
-    /// band may draw more, naming the band's top, and takes one whose band
-    /// stays within it.
+    /// A worker limited to 20 physics steps per cycle refuses a trial that
+    /// asks for more, naming the count, and takes one within it.
     #[test]
-    fn a_step_band_beyond_the_workers_limit_is_refused() {
+    fn steps_beyond_the_workers_limit_are_refused() {
         let cfg = WorkerConfig {
             max_substeps: 20,
             ..WorkerConfig::default()
         };
-        let band = |lo, hi| TrialRequest {
+        let steps = |n| TrialRequest {
             physics: Physics {
-                substeps: lo,
-                substeps_max: hi,
+                substeps: n,
                 ..Physics::default()
             },
             ..trial(0, vec![])
         };
-        let why = cfg.beyond_limits(&band(16, 30)).unwrap();
+        let why = cfg.beyond_limits(&steps(30)).unwrap();
         assert!(why.starts_with("30 physics substeps"), "{why}");
-        assert_eq!(cfg.beyond_limits(&band(16, 20)), None);
-        assert_eq!(cfg.beyond_limits(&band(20, 0)), None);
+        assert_eq!(cfg.beyond_limits(&steps(20)), None);
     }
 }

@@ -24,9 +24,8 @@
 //!
 //! How the torso is carried shows in `torso_pitch_deg`, its mean pitch over
 //! the cycles read: a fast walk that leans far back stands on its heels, and
-//! its distance swings with the physics step (docs/walk.md, "Where the walks
-//! part with the time step"). The closed loop's own reading of that pitch
-//! shows beside it in `tilt_error_deg`, its estimate's mean error.
+//! its distance swings with the physics step. The balance's own reading of
+//! that pitch shows beside it in `tilt_error_deg`, its estimate's mean error.
 
 use super::kinematics::{self, Iso};
 use super::model::NaoModel;
@@ -73,7 +72,7 @@ pub struct Footwork {
     /// moves 0; what a landed foot skids on before it holds shows here, and
     /// the torso is carried on by it.
     pub settle_m: f64,
-    /// The closed loop's pitch estimate less the torso's true pitch, mean
+    /// The balance's pitch estimate less the torso's true pitch, mean
     /// over the cycles it estimated, degrees (negative: it reads more lean
     /// back than there is; 0 for a walk that estimates none).
     pub tilt_error_deg: f64,
@@ -219,7 +218,7 @@ impl Tracker {
         self.cycles += 1;
     }
 
-    /// Adds the closed loop's pitch estimate `estimate_rad` of the cycle
+    /// Adds the balance's pitch estimate `estimate_rad` of the cycle
     /// whose (true) perception is `p`.
     pub fn fold_tilt(&mut self, estimate_rad: f64, p: &Perception) {
         self.tilt_error_sum += estimate_rad.to_degrees() - forward_pitch_deg(p.torso_rotation);

@@ -189,22 +189,7 @@ impl Morphology {
             | Param::StepLength
             | Param::StepPeriod
             | Param::DoubleSupport
-            | Param::ComAboveHip
-            | Param::HipPitchGain
-            | Param::AnklePitchGain
-            | Param::HipRollComp
-            | Param::ArmSwing
-            | Param::TurnPlace
-            | Param::StepReach
-            | Param::StepAim
-            | Param::LeanPlace
-            | Param::HipRollRateGain
-            | Param::StepAimHeading
-            | Param::TiltVector
-            | Param::PitchHoldGain
-            | Param::PitchHold
-            | Param::PitchHoldAnkle
-            | Param::StepAimBefore => None,
+            | Param::ComAboveHip => None,
         }
     }
 

@@ -75,7 +75,7 @@ pub fn write(out: &mut dyn Write, what: &Replayed<'_>) -> Result<NaoTrial, Repla
     let header = serde_json::json!({
         "robot_type": robot_type,
         "seed": seed,
-        "walk": engine.name(),
+        "feedback": engine.feedback,
         "params": named,
         "cycle_s": CYCLE_S,
         "bodies": bodies,

@@ -5,9 +5,10 @@
 //! It must stay a pure function of (model, settings, start, commands): no
 //! clock, no global state, no randomness (noise belongs to the trial).
 //!
-//! The physics decisions (joint formulation, time step, motors, limits,
-//! friction, contacts, sensors, fall) and their measurements are recorded in
-//! `docs/physics.md`.
+//! The physics decisions (joint formulation, time step, motors, stops,
+//! friction, contacts, sensors, fall) and their measurements are in
+//! `docs/walk.md`, "The physics". [`SimSettings::default`] is the one
+//! physics naofarm ships; its other fields exist to measure it.
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use rapier3d::prelude::*;
@@ -34,10 +35,9 @@ pub const SANE_SPEED_M_S: f64 = 50.0;
 pub const SANE_SPIN_RAD_S: f64 = 500.0;
 /// A hinge that turns faster than this over one 20 ms cycle has diverged,
 /// rad/s (3 rad a cycle). The servos are capped at 6.14 rad/s and the fastest
-/// joint of the shipped files over a cycle, landings and falls included, was
-/// 36 rad/s (docs/walk.md, session 46); an unstable solve of an arm turned a
-/// shoulder 4.5 rad in one cycle (226 rad/s) while every body stayed below
-/// [`SANE_SPIN_RAD_S`], and was scored as a fall with an 84° overrun.
+/// joint of any walk measured over a cycle, landings and falls included, was
+/// 36 rad/s; an unstable solve of an arm turned a shoulder 4.5 rad in one
+/// cycle (226 rad/s) while every body stayed below [`SANE_SPIN_RAD_S`].
 pub const SANE_JOINT_SPEED_RAD_S: f64 = 150.0;
 /// SimSpark's drag coefficient (force per velocity, torque per angular velocity).
 pub const DRAG: f64 = 0.01;
@@ -50,31 +50,9 @@ const FIRM_STOP_RESOLVE_PAST_DEG: f64 = -0.5;
 /// Type 4's toe hinges (`lle7`, `rle7`) rest at 0°, 1° from their stop at
 /// −1°, so the walk meets that stop in every step, where other stops are
 /// rarely met: without a stop that holds within a step, a toe dragged along
-/// the ground ran up to 29° through it and the open-loop walk fell in all
-/// of 100 trials (docs/physics.md, item 5). So they have firm stops in every
-/// world, with this window when the physics gives the others none; a world
-/// with toes then also solves every other joint's row past its stop again
-/// after the contacts, as a firm world does.
+/// the ground ran up to 29° through it. So they have firm stops in every
+/// world, with this window when the settings give the others none.
 pub const TOE_STOP_WINDOW_DEG: f64 = 3.0;
-
-/// The coarsest physics step on which type 4's toe hinges stand on a stiff
-/// ground without firm stops (`toes_bounce`), ms.
-const TOE_COARSEST_STEP_MS: f64 = 10.0;
-/// The stiffest ground type 4's toes stand on at that step without firm
-/// stops (`toes_bounce`), Hz: the firm file's.
-const TOE_STIFFEST_GROUND_HZ: f64 = 60.0;
-
-/// Whether `physics` is one on which type 4's toe hinges make the closed
-/// loop's feet bounce: 10 ms steps or coarser, a ground stiffer than 60 Hz,
-/// no firm stops. There its expert set falls in about 3 trials of 4
-/// (docs/walk.md, "The league's five types": welded toes walk; nothing on
-/// the hinge alone mends it).
-#[must_use]
-pub fn toes_bounce(physics: &protocol::Physics) -> bool {
-    !physics.firm_stops
-        && physics.step_ms() >= TOE_COARSEST_STEP_MS
-        && physics.contact_hz > TOE_STIFFEST_GROUND_HZ
-}
 
 /// Whether the model's joint `name` is a toe hinge (type 4).
 fn is_toe(name: &str) -> bool {
@@ -86,10 +64,6 @@ fn is_toe(name: &str) -> bool {
 pub struct SimSettings {
     /// Physics steps per 20 ms cycle.
     pub substeps: u32,
-    /// With it (≥ `substeps`), a trial draws its physics steps per cycle
-    /// from `substeps..=substeps_max` by its seed (`protocol::Physics::substeps_max`;
-    /// [`crate::nao::trial::drawn_substeps`]); 0: `substeps`.
-    pub substeps_max: u32,
     /// Solver iterations per physics step (each recomputes the multibody's mass matrix).
     pub solver_iterations: usize,
     /// Inner PGS iterations per solver iteration (cheap: no mass-matrix update).
@@ -108,104 +82,39 @@ pub struct SimSettings {
     /// a multibody's cost grows faster than its degrees of freedom, and the
     /// walk holds the head still).
     pub weld_head: bool,
-    /// With `weld_head`, weld the arm joints the walk holds still too (the
-    /// shoulder rolls and elbows): only the shoulder pitches swing, each
-    /// carrying its whole arm as one body (20 degrees of freedom instead
-    /// of 26).
-    pub weld_arm_rest: bool,
     /// With `weld_head`, weld the elbow yaws (`lae3`, `rae3`), which the
-    /// walk holds at 0° (`protocol::Physics::weld_elbow_yaws`).
+    /// walk holds at 0°, and so the elbow rolls (`lae4`, `rae4`) that hang
+    /// from them: each forearm rigid with its upper arm.
     pub weld_elbow_yaws: bool,
     /// Motor damping (velocity constraint stiffness), N·m·s/rad.
     pub motor_damping: f64,
-    /// Passive damping in every hinge, N·m·s/rad (multibody joints only).
-    pub joint_damping: f64,
-    /// Reflected rotor inertia of every motorised hinge, kg·m² (multibody
-    /// joints only; MuJoCo's `armature`). The league's robot has none.
-    pub armature_kg_m2: f64,
-    /// Impulse joints (maximal coordinates) instead of a multibody: kept to
-    /// measure the decision of §9 item 2 in `bench sim`, not for trials.
-    pub impulse_joints: bool,
-    /// Give every hinge its limit row in every step, as rapier does by itself,
-    /// instead of only to joints past a stop: kept to check in tests that
-    /// leaving the idle rows out changes no bit.
-    pub every_limit_row: bool,
-    /// Stops that hold within a step (`protocol::Physics::firm_stops`): a
+    /// Stops that hold within a step: a
     /// speculative limit row for every hinge within `firm_stop_window_deg` of
     /// a stop, and the limit rows solved again after the contacts (the vendored
     /// rapier3d's `speculative_joint_limits` and `joint_limits_after_contacts`).
     pub firm_stops: bool,
     /// With firm stops, a hinge this near a stop gets a speculative limit
-    /// row, degrees (`protocol::Physics::firm_stop_window_deg`; docs/walk.md,
-    /// "Firm stops": 1° and 3° hold the firm file's L alike; 3° keeps a fast
-    /// joint's row in place a step ahead; "The stop window": the arms file
-    /// needs 8°).
+    /// row, degrees.
     pub firm_stop_window_deg: f64,
     /// With firm stops, a hinge also gets its row when its speed would carry
     /// it into the window within this many physics steps (0: the window
-    /// alone; `protocol::Physics::firm_stop_lookahead`).
+    /// alone).
     pub firm_stop_lookahead: u32,
-    /// Every joint's speed cap times this (1: the league's robot): kept to
-    /// measure which limit stops a walk (`naofarm trial --limit`), not for trials.
-    pub speed_cap_scale: f64,
-    /// The joints (bits of their model indices) `speed_cap_scale` applies
-    /// to; 0: every joint.
-    pub speed_cap_joints: u64,
-    /// Most torque a servo applies, N·m ([`MAX_TORQUE_NM`]: the league's).
-    pub max_torque_nm: f64,
-    /// A trial's drawn ground friction times this (1: as drawn): kept to
-    /// measure a walk on a slippery floor (`naofarm trial --limit`), not
-    /// for trials.
-    pub friction_scale: f64,
-    /// Friction solved in the biased pass of each step as well as in the
-    /// unbiased one (rapier3d's `friction_in_bias_pass`; off as in rapier):
-    /// kept to measure where the feet's creep at 10 ms comes from
-    /// (`naofarm trial --limit`, docs/walk.md), not for trials.
-    pub friction_in_bias_pass: bool,
 }
 
 impl Default for SimSettings {
-    /// The experiment's default `[physics]` (defined once, in `protocol::Physics`)
-    /// and this module's contact and motor constants.
+    /// The one physics naofarm ships (docs/walk.md, "The physics"): the
+    /// experiment's default `[physics]` counts (defined once, in
+    /// `protocol::Physics`), a 60 Hz ground, stops that hold within a step
+    /// (within 8° of a stop or one step ahead of it), the arms free to
+    /// swing at the shoulders and the elbows but for the elbow yaws, the
+    /// head welded.
     fn default() -> Self {
-        let physics = protocol::Physics::default();
-        Self {
-            substeps: physics.substeps,
-            substeps_max: physics.substeps_max,
-            solver_iterations: physics.solver_iterations as usize,
-            pgs_iterations: physics.pgs_iterations as usize,
-            friction: 1.0,
-            contact_hz: physics.contact_hz,
-            contact_prediction_m: 0.005,
-            weld_upper_body: true,
-            weld_head: false,
-            weld_arm_rest: false,
-            weld_elbow_yaws: physics.weld_elbow_yaws,
-            motor_damping: 1000.0,
-            joint_damping: 0.0,
-            armature_kg_m2: physics.armature_kg_m2,
-            impulse_joints: false,
-            every_limit_row: false,
-            firm_stops: physics.firm_stops,
-            firm_stop_window_deg: physics.firm_stop_window_deg,
-            firm_stop_lookahead: physics.firm_stop_lookahead,
-            speed_cap_scale: 1.0,
-            speed_cap_joints: 0,
-            max_torque_nm: MAX_TORQUE_NM,
-            friction_scale: 1.0,
-            friction_in_bias_pass: false,
-        }
+        Self::with_physics(&protocol::Physics::default())
     }
 }
 
 impl SimSettings {
-    /// The physics steps per cycle a trial may run at: `substeps..=substeps_max`
-    /// with a band, else `substeps` alone.
-    #[must_use]
-    pub fn substeps_band(&self) -> std::ops::RangeInclusive<u32> {
-        self.substeps..=self.substeps.max(self.substeps_max)
-    }
-
     /// Whether these settings weld the hinge named `name` at its start angle.
     #[must_use]
     pub fn welds(&self, name: &str) -> bool {
@@ -213,25 +122,27 @@ impl SimSettings {
             && (self.weld_upper_body
                 || self.weld_head
                     && (!is_arm_joint(name)
-                        || self.weld_arm_rest && !is_shoulder_pitch(name)
-                        || self.weld_elbow_yaws && name.ends_with("ae3")))
+                        || self.weld_elbow_yaws
+                            && (name.ends_with("ae3") || name.ends_with("ae4"))))
     }
 
-    /// The defaults with an experiment's `[physics]` counts.
+    /// The shipped physics with an experiment's `[physics]` counts.
     #[must_use]
     pub fn with_physics(physics: &protocol::Physics) -> Self {
         Self {
             substeps: physics.substeps,
-            substeps_max: physics.substeps_max,
             solver_iterations: physics.solver_iterations as usize,
             pgs_iterations: physics.pgs_iterations as usize,
-            armature_kg_m2: physics.armature_kg_m2,
-            contact_hz: physics.contact_hz,
-            firm_stops: physics.firm_stops,
-            firm_stop_window_deg: physics.firm_stop_window_deg,
-            firm_stop_lookahead: physics.firm_stop_lookahead,
-            weld_elbow_yaws: physics.weld_elbow_yaws,
-            ..Self::default()
+            friction: 1.0,
+            contact_hz: 60.0,
+            contact_prediction_m: 0.005,
+            weld_upper_body: false,
+            weld_head: true,
+            weld_elbow_yaws: true,
+            motor_damping: 1000.0,
+            firm_stops: true,
+            firm_stop_window_deg: 8.0,
+            firm_stop_lookahead: 1,
         }
     }
 }
@@ -308,11 +219,10 @@ pub fn fallen(p: &Perception) -> bool {
     p.torso_position_m[2] < FALL_HEIGHT_M || p.torso_tilt_rad > FALL_TILT_RAD
 }
 
-/// A motorised hinge: a multibody link, or an impulse joint.
+/// A motorised hinge: a multibody link.
 #[derive(Debug, Clone, Copy)]
 struct Hinge {
     handle: MultibodyJointHandle,
-    impulse: Option<ImpulseJointHandle>,
     link: usize,
     max_speed: f32,
     /// Within this of a stop the hinge gets a speculative limit row, rad
@@ -409,12 +319,6 @@ pub fn is_upper_body_joint(name: &str) -> bool {
 /// The left and right shoulder pitches: the joints a swinging arm swings.
 pub const SHOULDER_PITCHES: [&str; 2] = ["lae1", "rae1"];
 
-/// Whether a joint is a shoulder's pitch ([`SHOULDER_PITCHES`]).
-#[must_use]
-pub fn is_shoulder_pitch(name: &str) -> bool {
-    SHOULDER_PITCHES.contains(&name)
-}
-
 /// Whether a joint is one of the arms' (shoulders, elbows).
 #[must_use]
 pub fn is_arm_joint(name: &str) -> bool {
@@ -444,8 +348,6 @@ impl Sim {
             || !(settings.contact_hz.is_finite() && settings.contact_hz > 0.0)
             || !(settings.contact_prediction_m.is_finite() && settings.contact_prediction_m > 0.0)
             || !(settings.motor_damping.is_finite() && settings.motor_damping > 0.0)
-            || !(settings.joint_damping.is_finite() && settings.joint_damping >= 0.0)
-            || !(settings.armature_kg_m2.is_finite() && settings.armature_kg_m2 >= 0.0)
             || !(start.pitch_rad.is_finite() && start.roll_rad.is_finite())
         {
             return Err(SimError::Settings(format!("{settings:?}")));
@@ -476,7 +378,6 @@ impl Sim {
         let firm_toes = model.joints.iter().any(|j| is_toe(&j.name));
         let firm = settings.firm_stops || firm_toes;
         world.integration_parameters.speculative_joint_limits = firm;
-        world.integration_parameters.friction_in_bias_pass = settings.friction_in_bias_pass;
         world.integration_parameters.joint_limits_after_contacts = if firm {
             FIRM_STOP_RESOLVE_PAST_DEG.to_radians() as f32
         } else {
@@ -608,9 +509,17 @@ impl Sim {
         let mut welded_angles = vec![0.0; n];
         for (j, joint) in model.joints.iter().enumerate() {
             welded_angles[j] = angles[j];
-            let (Place::Own(p), Place::Own(c)) = (&places[joint.parent], &places[joint.child])
-            else {
-                continue;
+            let (p, c) = match (&places[joint.parent], &places[joint.child]) {
+                (Place::Own(p), Place::Own(c)) => (p, c),
+                (_, Place::Welded { .. }) => continue,
+                // A hinge hanging from a welded body would leave its child
+                // attached to nothing.
+                (Place::Welded { .. }, Place::Own(_)) => {
+                    return Err(SimError::Settings(format!(
+                        "joint {} hangs from a welded body but is not welded itself",
+                        joint.name
+                    )))
+                }
             };
             let pc = model.bodies[joint.parent].centre;
             let cc = model.bodies[joint.child].centre;
@@ -621,40 +530,21 @@ impl Sim {
                 .limits([joint.limits_rad.0 as f32, joint.limits_rad.1 as f32])
                 .motor_model(MotorModel::ForceBased)
                 .motor_velocity(0.0, settings.motor_damping as f32)
-                .motor_max_force(settings.max_torque_nm as f32)
+                .motor_max_force(MAX_TORQUE_NM as f32)
                 .contacts_enabled(false);
-            let scaled = settings.speed_cap_joints == 0
-                || (j < 64 && settings.speed_cap_joints >> j & 1 == 1);
-            let scale = if scaled {
-                settings.speed_cap_scale
-            } else {
-                1.0
-            };
-            let max_speed = (joint.max_speed_rad_s * scale) as f32;
+            let max_speed = joint.max_speed_rad_s as f32;
             let stop_window = match (settings.firm_stops, is_toe(&joint.name)) {
                 (true, _) => settings.firm_stop_window_deg,
                 (false, true) => TOE_STOP_WINDOW_DEG,
                 (false, false) => 0.0,
             }
             .to_radians() as f32;
-            if settings.impulse_joints {
-                let handle = world.impulse_joints.insert(*p, *c, builder, true);
-                hinges[j] = Some(Hinge {
-                    handle: MultibodyJointHandle::invalid(),
-                    impulse: Some(handle),
-                    link: 0,
-                    max_speed,
-                    stop_window,
-                });
-                continue;
-            }
             let handle = world
                 .multibody_joints
                 .insert(*p, *c, builder, true)
                 .ok_or_else(|| SimError::Settings(format!("joint {} closes a loop", joint.name)))?;
             hinges[j] = Some(Hinge {
                 handle,
-                impulse: None,
                 link: 0,
                 max_speed,
                 stop_window,
@@ -683,9 +573,7 @@ impl Sim {
         };
         let torso_pose =
             motions[0] * nalgebra::Translation3::from(Vector3::from(model.bodies[0].centre));
-        if !settings.impulse_joints {
-            sim.pose_multibody(&angles, &torso_pose)?;
-        }
+        sim.pose_multibody(&angles, &torso_pose)?;
         sim.prev_angles = sim.joint_angles();
         Ok(sim)
     }
@@ -728,13 +616,6 @@ impl Sim {
         for d in mb.damping_mut().iter_mut() {
             *d = 0.0;
         }
-        for h in self.hinges.iter().flatten() {
-            if let Some(link) = mb.link(h.link) {
-                let id = link.assembly_id();
-                mb.damping_mut()[id] = self.settings.joint_damping as f32;
-                mb.armature_mut()[id] = self.settings.armature_kg_m2 as f32;
-            }
-        }
         mb.forward_kinematics(&self.world.bodies, false);
         mb.update_rigid_bodies(&mut self.world.bodies, true);
         Ok(())
@@ -764,9 +645,8 @@ impl Sim {
         self.hinges.get(joint).is_some_and(Option::is_some)
     }
 
-    /// Each model joint's speed cap in this world, rad/s (the model's, times
-    /// [`SimSettings::speed_cap_scale`] where it applies); `None` for a welded
-    /// joint. [`Sim::step`] clamps a command to it.
+    /// Each model joint's speed cap in this world, rad/s; `None` for a
+    /// welded joint. [`Sim::step`] clamps a command to it.
     #[must_use]
     pub fn speed_caps(&self) -> Vec<Option<f32>> {
         self.hinges.iter().map(|h| h.map(|h| h.max_speed)).collect()
@@ -776,28 +656,6 @@ impl Sim {
     #[must_use]
     pub fn joint_angles(&self) -> Vec<f64> {
         let mut out = self.welded_angles.clone();
-        if self.settings.impulse_joints {
-            // The twist of child relative to parent about the joint axis (the
-            // zero pose has every body frame aligned with the world).
-            let g = self.body_motions();
-            for (j, joint) in self.model.joints.iter().enumerate() {
-                if self.hinges[j].is_none() {
-                    continue;
-                }
-                let rel = g[joint.parent].rotation.inverse() * g[joint.child].rotation;
-                let q = rel.quaternion();
-                let twist = q.imag().dot(&Vector3::from(joint.axis));
-                // q and -q are the same turn: take the one with w >= 0, so
-                // the angle is in [-pi, pi].
-                let (twist, w) = if q.w < 0.0 {
-                    (-twist, -q.w)
-                } else {
-                    (twist, q.w)
-                };
-                out[j] = 2.0 * libm::atan2(twist, w);
-            }
-            return out;
-        }
         let Some((mb, _)) = self.world.multibody_joints.get(self.root_joint) else {
             return out;
         };
@@ -825,20 +683,6 @@ impl Sim {
             }
         }
         let damping = self.settings.motor_damping as f32;
-        for (h, c) in self.hinges.iter().zip(commands) {
-            let Some(Hinge {
-                impulse: Some(ih),
-                max_speed,
-                ..
-            }) = h
-            else {
-                continue;
-            };
-            let v = (*c as f32).clamp(-max_speed, *max_speed);
-            if let Some(joint) = self.world.impulse_joints.get_mut(*ih, true) {
-                joint.data.set_motor_velocity(JointAxis::AngX, v, damping);
-            }
-        }
         let drag = DRAG as f32;
         for _ in 0..self.settings.substeps {
             self.set_motors_and_stops(commands, damping);
@@ -891,32 +735,24 @@ impl Sim {
     /// Whether every hinge turned at most [`SANE_JOINT_SPEED_RAD_S`] allows
     /// since the last cycle's `prev_angles`, to `angles`. A non-finite angle
     /// fails it too (the start pose is finite, and so then is every angle
-    /// kept). Impulse joints' angles are read in [−π, π] (`joint_angles`): a
-    /// hinge that passes ±π turns by the difference taken round the circle.
+    /// kept).
     fn hinges_sane(&self, angles: &[f64]) -> bool {
         let turn = SANE_JOINT_SPEED_RAD_S * CYCLE_S;
-        let wrap = self.settings.impulse_joints;
-        angles.iter().zip(&self.prev_angles).all(|(a, b)| {
-            let d = a - b;
-            let d = if wrap {
-                libm::remainder(d, std::f64::consts::TAU)
-            } else {
-                d
-            };
-            d.abs() <= turn
-        })
+        angles
+            .iter()
+            .zip(&self.prev_angles)
+            .all(|(a, b)| (a - b).abs() <= turn)
     }
 
     /// Sets each multibody hinge's motor for the next physics step, and its
-    /// stop only where it acts. Rapier's multibody limit does nothing unless
-    /// the joint is already past it (its impulse bounds are [0, 0]) yet costs a
-    /// solve with the mass matrix per hinge and step; besides, it clamps the
-    /// motor's target velocity so that the step ends on the stop at most. So a
-    /// joint within its range gets no limit row and that clamp here, computed
-    /// as rapier does: the same dynamics, bit for bit, with fewer rows.
+    /// stop only where it may act: a hinge within its stop window of a stop
+    /// (or, with the look-ahead, whose speed would carry it there) gets its
+    /// limit row, speculative with firm stops. Any other hinge gets no row,
+    /// which would cost a solve with the mass matrix per hinge and step, and
+    /// its motor's target velocity is clamped so that the step ends on the
+    /// stop at most, as rapier's own limit does.
     fn set_motors_and_stops(&mut self, commands: &[f64], damping: f32) {
         let inv_dt = self.world.integration_parameters.inv_dt();
-        let every_limit_row = self.settings.every_limit_row;
         // Only firm stops look ahead (the toes' own window does not).
         let lookahead = if self.settings.firm_stops {
             self.settings.firm_stop_lookahead as f32
@@ -944,7 +780,7 @@ impl Sim {
             let data = &mut l.joint.data;
             let window = h.stop_window;
             let (reach_lo, reach_hi) = (q + ahead.min(0.0), q + ahead.max(0.0));
-            if every_limit_row || reach_lo < lo + window || hi - window < reach_hi {
+            if reach_lo < lo + window || hi - window < reach_hi {
                 data.set_limits(JointAxis::AngX, [lo, hi]);
             } else {
                 data.limit_axes.remove(JointAxesMask::ANG_X);
@@ -1126,31 +962,27 @@ mod tests {
 
     #[test]
     fn rapier_pose_matches_forward_kinematics() {
-        let arm_rest = ["he1", "he2", "lae2", "lae3", "lae4", "rae2", "rae3", "rae4"];
-        for (weld, weld_head, weld_arm_rest, impulse) in [
-            (false, false, false, false),
-            (false, true, false, false),
-            (false, true, true, false),
-            (true, false, false, false),
-            (true, false, false, true),
+        for (weld, weld_head, weld_elbow_yaws) in [
+            (false, false, false),
+            (false, true, false),
+            (false, true, true),
+            (true, false, false),
         ] {
             let m = model(4);
             let q = standing_angles(&m);
             let settings = SimSettings {
                 weld_upper_body: weld,
                 weld_head,
-                weld_arm_rest,
-                impulse_joints: impulse,
+                weld_elbow_yaws,
                 ..SimSettings::default()
             };
             let mut sim = Sim::new(&m, settings, &Start::upright(q.clone())).unwrap();
             for (j, joint) in m.joints.iter().enumerate() {
-                let welded = if weld_arm_rest {
-                    arm_rest.contains(&joint.name.as_str())
-                } else {
-                    is_upper_body_joint(&joint.name)
-                        && (weld || weld_head && !is_arm_joint(&joint.name))
-                };
+                let elbow_yaw = joint.name.ends_with("ae3") || joint.name.ends_with("ae4");
+                let welded = is_upper_body_joint(&joint.name)
+                    && (weld
+                        || weld_head
+                            && (!is_arm_joint(&joint.name) || weld_elbow_yaws && elbow_yaw));
                 assert_eq!(settings.welds(&joint.name), welded, "{}", joint.name);
                 assert_eq!(sim.is_motorised(j), !welded, "{}", joint.name);
             }
@@ -1169,10 +1001,8 @@ mod tests {
             assert!((simulated - robot).abs() < 1e-4, "{simulated} {robot}");
             let ours = sim.body_motions();
             let angles = sim.joint_angles();
-            // Impulse joints read angles back from f32 body rotations.
-            let tol = if impulse { 1e-5 } else { 1e-6 };
             for (a, b) in angles.iter().zip(&q) {
-                assert!((a - b).abs() < tol, "{a} {b} (impulse {impulse})");
+                assert!((a - b).abs() < 1e-6, "{a} {b}");
             }
             let root = ours[0];
             let fk = kinematics::body_motions(&m, &q, &root);
@@ -1278,49 +1108,6 @@ mod tests {
         assert!(!a.is_empty());
     }
 
-    /// Leaving out the limit rows of joints within their range changes no
-    /// bit: a walk-like motion that hits stops (knees, ankles) twice over.
-    #[test]
-    fn idle_limit_rows_change_nothing() {
-        let m = model(0);
-        let q = standing_angles(&m);
-        let run = |every_limit_row| {
-            let settings = SimSettings {
-                every_limit_row,
-                ..SimSettings::default()
-            };
-            let mut sim = Sim::new(&m, settings, &Start::upright(q.clone())).unwrap();
-            let mut past_stops = 0;
-            for k in 0..150 {
-                let t = f64::from(k) * CYCLE_S;
-                let cmd: Vec<f64> = m
-                    .joints
-                    .iter()
-                    .enumerate()
-                    .map(|(j, _)| 4.0 * (7.0 * t + j as f64).sin())
-                    .collect();
-                let p = sim.step(&cmd).unwrap();
-                past_stops += m
-                    .joints
-                    .iter()
-                    .zip(&p.joint_angles_rad)
-                    .filter(|(j, a)| **a < j.limits_rad.0 || **a > j.limits_rad.1)
-                    .count();
-            }
-            (
-                sim.body_poses()
-                    .iter()
-                    .flat_map(|p| p.iter().map(|x| x.to_bits()))
-                    .collect::<Vec<_>>(),
-                past_stops,
-            )
-        };
-        let (pruned, hits) = run(false);
-        let (full, _) = run(true);
-        assert!(hits > 0, "the motion never reached a stop");
-        assert_eq!(pruned, full);
-    }
-
     #[test]
     fn bad_commands_are_refused() {
         let m = model(0);
@@ -1372,17 +1159,5 @@ mod tests {
         within.prev_angles[knee] += bound - 0.05;
         assert!(matches!(sim.hold(&q), Err(SimError::Diverged(_))));
         assert!(within.hold(&q).is_ok());
-        // Impulse joints read their angles in [−π, π]: a hinge that passes
-        // ±π has turned by the difference round the circle, not by 2π.
-        let impulse = SimSettings {
-            impulse_joints: true,
-            ..SimSettings::default()
-        };
-        let mut round = Sim::new(&m, impulse, &Start::upright(q.clone())).unwrap();
-        assert!(round.hold(&q).is_ok());
-        round.prev_angles[knee] += std::f64::consts::TAU;
-        assert!(round.hold(&q).is_ok());
-        round.prev_angles[knee] += std::f64::consts::TAU - (bound + 0.05);
-        assert!(matches!(round.hold(&q), Err(SimError::Diverged(_))));
     }
 }
