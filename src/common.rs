@@ -14,6 +14,15 @@ pub enum Failure {
     Job(anyhow::Error),
 }
 
+/// A usage error (exit 2) saying `why`, unless `ok`.
+pub fn usage_unless(ok: bool, why: impl FnOnce() -> String) -> Result<(), Failure> {
+    if ok {
+        Ok(())
+    } else {
+        Err(Failure::Usage(anyhow::anyhow!(why())))
+    }
+}
+
 /// A coordinator service failure: serving a run twice is a usage error (exit 2), the rest job failures.
 pub fn service_failure(e: coordinator::service::ServiceError) -> Failure {
     match e {

@@ -4,7 +4,7 @@
 
 mod util;
 
-use util::{events, fails, naofarm, root, scratch, succeed};
+use util::{events, fails, naofarm, root, run_events, scratch, succeed};
 
 #[test]
 fn check_prints_the_five_parameters_with_the_papers_bounds() {
@@ -214,14 +214,7 @@ fn malformed_experiments_exit_2_naming_the_problem() {
 #[test]
 fn run_completes_a_synthetic_experiment_in_one_process() {
     let dir = scratch("run");
-    let out = succeed(
-        naofarm()
-            .args(["run", "--json", "--workers", "2", "--iterations", "8"])
-            .arg(root().join("experiments/synthetic.toml"))
-            .arg("--out")
-            .arg(dir.join("run")),
-    );
-    let ev = events(&out.stdout);
+    let ev = run_events("synthetic.toml".as_ref(), 2, 8, &dir.join("run"));
     let lines = ev.decided;
     assert_eq!(lines.len(), 8);
     let status = ev.status.expect("status lines");
@@ -323,14 +316,8 @@ fn a_torn_journal_resumes_and_a_corrupt_one_is_refused_with_its_offset() {
 #[test]
 fn the_main_job_runs_five_nao_iterations() {
     let dir = scratch("main-job");
-    let out = succeed(
-        naofarm()
-            .args(["run", "--json", "--iterations", "5"])
-            .arg(root().join("experiments/physical-technical.toml"))
-            .arg("--out")
-            .arg(dir.join("run")),
-    );
-    let ev = events(&out.stdout);
+    let file = "physical-technical.toml".as_ref();
+    let ev = run_events(file, 2, 5, &dir.join("run"));
     let lines = ev.decided;
     assert_eq!(lines.len(), 5);
     assert_eq!(

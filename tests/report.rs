@@ -7,30 +7,18 @@ mod util;
 
 use std::path::{Path, PathBuf};
 
-use util::{events, fails, naofarm, root, scratch, succeed};
+use util::{fails, naofarm, root, run_events, scratch, succeed};
 
 /// A finished 24-iteration synthetic run in `dir/run`; returns its `run
 /// --json` finished line.
 fn synthetic_run(dir: &Path) -> serde_json::Value {
-    let out = succeed(
-        naofarm()
-            .args(["run", "--json", "--workers", "2", "--iterations", "24"])
-            .arg(root().join("experiments/synthetic.toml"))
-            .arg("--out")
-            .arg(dir.join("run")),
-    );
-    events(&out.stdout).finished.expect("a finished line")
+    let ev = run_events("synthetic.toml".as_ref(), 2, 24, &dir.join("run"));
+    ev.finished.expect("a finished line")
 }
 
 /// Two iterations of an experiment file of `experiments/`, in `dir/run`.
 fn nao_run(dir: &Path, file: &str) {
-    succeed(
-        naofarm()
-            .args(["run", "--json", "--workers", "2", "--iterations", "2"])
-            .arg(root().join("experiments").join(file))
-            .arg("--out")
-            .arg(dir.join("run")),
-    );
+    run_events(file.as_ref(), 2, 2, &dir.join("run"));
 }
 
 fn report(dir: &Path) -> PathBuf {
@@ -620,13 +608,7 @@ fn trial_runs_a_runs_table_iv_sets_by_name_as_the_report_does() {
         .replace("trial_duration_s = 10.0", "trial_duration_s = 1.0");
     let file = dir.join("straight.toml");
     std::fs::write(&file, text).unwrap();
-    succeed(
-        naofarm()
-            .args(["run", "--json", "--workers", "2", "--iterations", "1"])
-            .arg(&file)
-            .arg("--out")
-            .arg(dir.join("straight")),
-    );
+    run_events(&file, 2, 1, &dir.join("straight"));
     let sets = |set: &str| {
         let mut c = naofarm();
         c.args(["trial", "--trials", "1", "--set", set, "--experiment"])

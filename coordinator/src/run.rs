@@ -512,31 +512,27 @@ impl Run {
             }
         };
         run.journal.append(&Record::clock_now(true))?;
-        for o in opened_records {
-            let same = actions
-                .iter()
-                .any(|a| matches!(a, Action::Open(x) if x == &o));
-            if !same {
-                return Err(RunError::Diverged {
-                    dir: dirs,
-                    iteration: o.iteration,
-                    why: "the journaled parameter set differs from the replayed one".into(),
-                });
+        let diverged = |iteration: u64, what: &str| RunError::Diverged {
+            dir: dirs.clone(),
+            iteration,
+            why: format!("the journaled {what} differs from the replayed one"),
+        };
+        let opened = opened_records
+            .iter()
+            .map(|o| (o.iteration, true, Action::Open(o.clone())));
+        let decided = decided_records
+            .iter()
+            .map(|d| (d.iteration, false, Action::Decided(d.clone())));
+        for (iteration, open, record) in opened.chain(decided) {
+            if !actions.contains(&record) {
+                let what = if open { "parameter set" } else { "decision" };
+                return Err(diverged(iteration, what));
             }
-            run.journaled_open.insert(o.iteration);
-        }
-        for d in decided_records {
-            let same = actions
-                .iter()
-                .any(|a| matches!(a, Action::Decided(x) if x == &d));
-            if !same {
-                return Err(RunError::Diverged {
-                    dir: dirs,
-                    iteration: d.iteration,
-                    why: "the journaled decision differs from the replayed one".into(),
-                });
+            if open {
+                run.journaled_open.insert(iteration);
+            } else {
+                run.journaled_decided.insert(iteration);
             }
-            run.journaled_decided.insert(d.iteration);
         }
         let mut effects = run.act(actions)?;
         // Re-issue every trial still pending (act() issued only new iterations).

@@ -568,62 +568,42 @@ expert = -0.04
 
     #[test]
     fn each_malformed_variant_names_its_problem() {
-        let cases: &[(&str, &str, &str)] = &[
-            ("seed = 1", "seed = 1\nbogus = 3", "bogus"),
-            ("upper = -0.03", "upper = -0.09", "parameter[0].lower"),
-            ("expert = -0.04", "expert = -0.02", "parameter[0].expert"),
+        let mut cases: Vec<(&str, String, &str)> = vec![
+            ("seed = 1", "seed = 1\nbogus = 3".into(), "bogus"),
             (
-                "iterations = 5",
-                "iterations = 5\ntrials_per_iteration = 0",
-                "trials_per_iteration",
+                "upper = -0.03",
+                "upper = -0.09".into(),
+                "parameter[0].lower",
+            ),
+            (
+                "expert = -0.04",
+                "expert = -0.02".into(),
+                "parameter[0].expert",
             ),
             (
                 "\"ThighRelHip2_Z\"",
-                "\"ThighLength\"",
-                "unknown parameter `ThighLength`",
+                "\"ThighLength\"".into(),
+                "unknown parameter",
             ),
-            ("lower = -0.08", "lower = nan", "parameter[0].lower"),
-            (
-                "iterations = 5",
-                "iterations = 5\n[pickout]\nbeta = 3.0",
-                "pickout.beta",
-            ),
-            (
-                "iterations = 5",
-                "iterations = 5\ntrial_duration_s = inf",
-                "trial_duration_s",
-            ),
-            ("name = \"t\"", "name = \"a/b\"", "name"),
-            ("lower = -0.08", "lower = -0.5", "admissible range"),
-            (
-                "iterations = 5",
-                "iterations = 5\n[physics]\nsubsteps = 0",
-                "physics.substeps",
-            ),
-            (
-                "iterations = 5",
-                "iterations = 5\n[physics]\npgs_iterations = 500",
-                "physics.pgs_iterations",
-            ),
-            (
-                "iterations = 5",
-                "iterations = 5\n[physics]\ntimestep = 0.001",
-                "timestep",
-            ),
-            // The physics' variants are gone: a file that still asks for
-            // one is told which key is no longer known.
-            (
-                "iterations = 5",
-                "iterations = 5\n[physics]\nfirm_stops = true",
-                "firm_stops",
-            ),
-            (
-                "iterations = 5",
-                "iterations = 5\nwalk = \"closed-loop\"",
-                "walk",
-            ),
+            ("lower = -0.08", "lower = nan".into(), "parameter[0].lower"),
+            ("name = \"t\"", "name = \"a/b\"".into(), "name"),
+            ("lower = -0.08", "lower = -0.5".into(), "admissible range"),
         ];
-        for (from, to, needle) in cases {
+        // Keys added after `iterations`; the physics' variants are gone, so a
+        // file that still asks for one is told which key is unknown.
+        for (added, needle) in [
+            ("trials_per_iteration = 0", "trials_per_iteration"),
+            ("[pickout]\nbeta = 3.0", "pickout.beta"),
+            ("trial_duration_s = inf", "trial_duration_s"),
+            ("[physics]\nsubsteps = 0", "physics.substeps"),
+            ("[physics]\npgs_iterations = 500", "physics.pgs_iterations"),
+            ("[physics]\ntimestep = 0.001", "timestep"),
+            ("[physics]\nfirm_stops = true", "firm_stops"),
+            ("walk = \"closed-loop\"", "walk"),
+        ] {
+            cases.push(("iterations = 5", format!("iterations = 5\n{added}"), needle));
+        }
+        for (from, to, needle) in &cases {
             let text = GOOD.replacen(from, to, 1);
             assert_ne!(text, GOOD, "{from}");
             let msg = err(&text);

@@ -12,7 +12,7 @@ use rcgen::{
     Issuer, KeyPair, KeyUsagePurpose, SanType,
 };
 
-use crate::common::Failure;
+use crate::common::{usage_unless, Failure};
 
 /// The roles, each a certificate's common name.
 pub const ROLES: [&str; 4] = ["coordinator", "worker", "watcher", "router"];
@@ -75,11 +75,8 @@ pub fn certs(
     force: bool,
     expired: bool,
 ) -> Result<(), Failure> {
-    if days == 0 || days > 3650 {
-        return Err(Failure::Usage(anyhow!(
-            "--days {days}: must be in 1..=3650"
-        )));
-    }
+    let days_ok = (1..=3650).contains(&days);
+    usage_unless(days_ok, || format!("--days {days}: must be in 1..=3650"))?;
     // Which certificates: every role, plus ROLE:NAME for each --name.
     let mut wanted: Vec<(String, String)> = ROLES
         .iter()

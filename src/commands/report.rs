@@ -15,7 +15,7 @@ use protocol::{
 };
 use worker::nao::{footwork::Footwork, sim::SimSettings, trial};
 
-use crate::common::{note_tail, Failure};
+use crate::common::{note_tail, usage_unless, Failure};
 use crate::render;
 
 mod figures;
@@ -57,11 +57,10 @@ pub fn report(
     trials: u32,
     threads: usize,
 ) -> Result<(), Failure> {
-    if trials == 0 || trials > 100_000 {
-        return Err(Failure::Usage(anyhow!(
-            "--trials {trials}: give 1 to 100000 trials per Table IV row"
-        )));
-    }
+    let many = (1..=100_000).contains(&trials);
+    usage_unless(many, || {
+        format!("--trials {trials}: 1 to 100000 per Table IV row")
+    })?;
     match (dirs, out) {
         ([], _) => Err(Failure::Usage(anyhow!("give at least one run directory"))),
         ([dir], out) => one(dir, read(dir)?, out, trials, threads).map(|_| ()),

@@ -17,7 +17,7 @@ use worker::nao::{
 
 use crate::{
     args::TrialArgs,
-    common::{load_experiment, parse_params, Failure},
+    common::{load_experiment, parse_params, usage_unless, Failure},
 };
 
 /// `naofarm trial`: n trials of one parameter set, the Table IV row.
@@ -25,24 +25,21 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     if let (Some(dir), Some(i), Some(k)) = (&a.run_dir, a.iteration, a.trial) {
         return replay(a, dir, i, k);
     }
-    if a.trials == 0 || a.trials > 100_000 {
-        return Err(Failure::Usage(anyhow!("--trials must be in 1..=100000")));
-    }
+    let trials_ok = (1..=100_000).contains(&a.trials);
+    usage_unless(trials_ok, || "--trials must be in 1..=100000".into())?;
     let (exp, start) = start_from(a)?.unzip();
-    if exp.as_ref().is_some_and(|e| e.model != TrialModel::Nao) {
-        return Err(Failure::Usage(anyhow!(
-            "--experiment: a trial runs the NAO, not the `synthetic` model"
-        )));
-    }
+    let nao = exp.as_ref().is_none_or(|e| e.model == TrialModel::Nao);
+    usage_unless(nao, || {
+        "--experiment: a trial runs the NAO, not `synthetic`".into()
+    })?;
     let duration = a
         .duration
         .or(exp.as_ref().map(|e| e.trial_duration_s))
         .unwrap_or(10.0);
-    if !(duration.is_finite() && duration > 0.0 && duration <= 3600.0) {
-        return Err(Failure::Usage(anyhow!(
-            "--duration must be in (0, 3600] s, as an experiment's trial_duration_s"
-        )));
-    }
+    let duration_ok = duration.is_finite() && duration > 0.0 && duration <= 3600.0;
+    usage_unless(duration_ok, || {
+        "--duration must be in (0, 3600] s, as an experiment's trial_duration_s".into()
+    })?;
     let robot_type = a
         .robot_type
         .or(exp.as_ref().map(|e| e.robot_type))

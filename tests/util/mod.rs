@@ -178,6 +178,21 @@ pub struct Events {
     pub finished: Option<serde_json::Value>,
 }
 
+/// `naofarm run --json --iterations N` of experiment file `file` (a path, or
+/// a name in `experiments/`) with `workers` local workers, journaled in
+/// `out`; it must succeed. Its events.
+pub fn run_events(file: &Path, workers: u32, iterations: u64, out: &Path) -> Events {
+    let run = succeed(
+        naofarm()
+            .args(["run", "--json", "--workers", &workers.to_string()])
+            .args(["--iterations", &iterations.to_string()])
+            .arg(root().join("experiments").join(file))
+            .arg("--out")
+            .arg(out),
+    );
+    events(&run.stdout)
+}
+
 pub fn events(stdout: &[u8]) -> Events {
     let mut e = Events {
         history: Vec::new(),

@@ -18,24 +18,30 @@ fn bits(v: &[f32]) -> Vec<u32> {
     v.iter().map(|x| x.to_bits()).collect()
 }
 
+/// Solves `b` with nalgebra's LU and with the slice kernel; asserts the
+/// same bits, naming `what`.
+fn solves_alike(
+    lu: &nalgebra::LU<f32, nalgebra::Dyn, nalgebra::Dyn>,
+    b: nalgebra::DVector<f32>,
+    what: &str,
+) {
+    let (mut theirs, mut ours) = (b.clone(), b);
+    assert!(lu.solve_mut(&mut theirs));
+    rapier3d::utils::slice_blas::lu_solve(lu, ours.as_mut_slice());
+    assert_eq!(bits(ours.as_slice()), bits(theirs.as_slice()), "{what}");
+}
+
 #[test]
 fn the_slice_kernels_give_nalgebras_bits() {
-    use rapier3d::utils::slice_blas::{axpy, lu_solve, solve_upper};
+    use rapier3d::utils::slice_blas::{axpy, solve_upper};
     for n in [1, 2, 7, 24, 32] {
         let lu = nalgebra::LU::new(pivoting_matrix(n));
         // Every column of M⁻¹, as the motor and stop rows ask for it.
         let mut moved = 0;
         for k in 0..n {
-            let mut theirs = nalgebra::DVector::<f32>::zeros(n);
-            theirs[k] = 1.0;
-            let mut ours = theirs.clone();
-            assert!(lu.solve_mut(&mut theirs));
-            lu_solve(&lu, ours.as_mut_slice());
-            assert_eq!(
-                bits(ours.as_slice()),
-                bits(theirs.as_slice()),
-                "n {n}, column {k}"
-            );
+            let mut unit = nalgebra::DVector::<f32>::zeros(n);
+            unit[k] = 1.0;
+            solves_alike(&lu, unit, &format!("n {n}, column {k}"));
             let mut permuted = nalgebra::DVector::<f32>::zeros(n);
             permuted[k] = 1.0;
             lu.p().permute_rows(&mut permuted);
@@ -58,14 +64,8 @@ fn the_slice_kernels_give_nalgebras_bits() {
                 if let Some(z) = negative_zero {
                     b[z] = -0.0;
                 }
-                let (mut theirs, mut ours) = (b.clone(), b);
-                assert!(lu.solve_mut(&mut theirs));
-                lu_solve(&lu, ours.as_mut_slice());
-                assert_eq!(
-                    bits(ours.as_slice()),
-                    bits(theirs.as_slice()),
-                    "n {n}, zeros before {first}, -0 at {negative_zero:?}"
-                );
+                let what = format!("n {n}, zeros before {first}, -0 at {negative_zero:?}");
+                solves_alike(&lu, b, &what);
             }
         }
         // A dense right-hand side through the upper triangle.
