@@ -1,5 +1,114 @@
-//! The vendored rapier3d's slice kernels (vendor/rapier3d/NAOFARM.md), which
-//! do nalgebra's arithmetic faster, give its bits.
+//! The vendored rapier3d's own changes beyond the release's (vendor/rapier3d/
+//! NAOFARM.md): what the release left as stubs now works. naofarm's NAO
+//! uses hinges only, so these paths are checked here on their own; and the
+//! slice kernels that do nalgebra's arithmetic faster give its bits.
+
+use rapier3d::math::Vector;
+use rapier3d::prelude::*;
+use rapier3d::utils::CrossProduct;
+
+/// A pendulum on a multibody joint with the angular axes `free` free (every
+/// linear axis locked), its bob's centre at `bob` below-and-beside the pivot
+/// at the origin; runs `steps` steps of 5 ms and returns, per step, the
+/// bob's centre, its angular velocity and the joint's coordinates.
+fn pendulum(
+    free: JointAxesMask,
+    limit_x: Option<[f32; 2]>,
+    bob: Vector,
+    steps: usize,
+) -> Vec<(Vector, Vector, [f32; 6])> {
+    let mut world = PhysicsWorld::new();
+    world.gravity = Vector::new(0.0, 0.0, -9.81);
+    world.integration_parameters.dt = 0.005;
+    let base = world.bodies.insert(RigidBodyBuilder::fixed());
+    let link = world
+        .bodies
+        .insert(RigidBodyBuilder::dynamic().translation(bob));
+    world.colliders.insert_with_parent(
+        ColliderBuilder::ball(0.03).density(1000.0),
+        link,
+        &mut world.bodies,
+    );
+    let mut joint = GenericJointBuilder::new(JointAxesMask::all() - free)
+        .local_anchor1(Vector::ZERO)
+        .local_anchor2(-bob);
+    if let Some(l) = limit_x {
+        joint = joint.limits(JointAxis::AngX, l);
+    }
+    let handle = world
+        .multibody_joints
+        .insert(base, link, joint, true)
+        .expect("a tree");
+    (0..steps)
+        .map(|_| {
+            world.step();
+            let rb = &world.bodies[link];
+            let (mb, id) = world.multibody_joints.get(handle).expect("the joint");
+            let c = mb.link(id).expect("the link").joint().coords();
+            (
+                rb.translation(),
+                rb.angvel(),
+                [c[0], c[1], c[2], c[3], c[4], c[5]],
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn a_multibody_joint_with_two_free_angular_axes_swings_about_those_two_only() {
+    let bob = Vector::new(0.05, 0.08, -0.3);
+    let run = pendulum(JointAxesMask::ANG_X | JointAxesMask::ANG_Y, None, bob, 400);
+    // Gravity on the offset bob turns it about x and y: both coordinates move.
+    let swing = |k: usize| run.iter().map(|r| r.2[k].abs()).fold(0.0f32, f32::max);
+    assert!(
+        swing(3) > 0.1 && swing(4) > 0.1,
+        "x {} y {}",
+        swing(3),
+        swing(4)
+    );
+    assert_eq!(swing(5), 0.0, "the locked z coordinate moved");
+    for (centre, angvel, _) in &run {
+        assert!(centre.is_finite() && angvel.is_finite());
+        // The parent is fixed with its joint frame on the world's axes, so
+        // the bob's angular velocity is the joint's: none about z.
+        assert!(
+            angvel.z.abs() <= 1e-4 * angvel.length().max(1.0),
+            "spin about the locked axis: {angvel:?}"
+        );
+        // The pivot holds: the bob stays on its sphere about the origin.
+        assert!((centre.length() - bob.length()).abs() < 1e-3, "{centre:?}");
+        // A pendulum gains no energy: the bob never rises above its start.
+        assert!(centre.z <= bob.z + 1e-3, "rose to {}", centre.z);
+    }
+}
+
+#[test]
+fn a_two_free_axis_joint_keeps_the_limit_of_each_axis() {
+    let bob = Vector::new(0.05, 0.08, -0.3);
+    let run = pendulum(
+        JointAxesMask::ANG_X | JointAxesMask::ANG_Y,
+        Some([-0.1, 0.1]),
+        bob,
+        400,
+    );
+    let x = run.iter().map(|r| r.2[3].abs()).fold(0.0f32, f32::max);
+    let y = run.iter().map(|r| r.2[4].abs()).fold(0.0f32, f32::max);
+    assert!(x <= 0.1 + 0.02, "x went to {x} past its 0.1 rad stop");
+    assert!(y > 0.1, "y, without a limit, swung only {y}");
+}
+
+#[test]
+fn a_scalar_crosses_a_3d_vector_as_an_angular_velocity_about_z() {
+    // The 2D meaning of a scalar angular quantity, s·ẑ × v.
+    let v = Vector::new(1.0, 2.0, 3.0);
+    assert_eq!(2.0f32.gcross(v), Vector::new(-4.0, 2.0, 0.0));
+    assert_eq!(
+        2.0f32.gcross(v),
+        Vector::new(0.0, 0.0, 2.0).cross(Vector::new(1.0, 2.0, 0.0))
+    );
+    let n = rapier3d::na::Vector3::new(1.0f32, 2.0, 3.0);
+    assert_eq!(2.0f32.gcross(n), rapier3d::na::Vector3::new(-4.0, 2.0, 0.0));
+}
 
 /// A well-conditioned `n × n` matrix with every entry set, whose LU
 /// factorisation pivots.

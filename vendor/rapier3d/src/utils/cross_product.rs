@@ -41,12 +41,17 @@ impl<T: SimdRealField + Copy> CrossProduct<Vector2<T>> for T {
     }
 }
 
+// naofarm: the release left the two impls below as stubs that panic
+// (the trait bound `ScalarType` needs them; rapier3d never calls
+// them). They now mean what a scalar angular quantity means in 2D: the
+// scalar s is the angular vector s·ẑ, so s × v = (−s·v.y, s·v.x, 0), the 2D
+// formula with a zero z.
 #[cfg(not(target_arch = "spirv"))]
 impl<T: SimdRealField + Copy> CrossProduct<Vector3<T>> for T {
     type Result = Vector3<T>;
 
-    fn gcross(&self, _rhs: Vector3<T>) -> Self::Result {
-        unreachable!()
+    fn gcross(&self, rhs: Vector3<T>) -> Self::Result {
+        Vector3::new(-rhs.y * *self, rhs.x * *self, T::zero())
     }
 }
 
@@ -54,8 +59,8 @@ impl<T: SimdRealField + Copy> CrossProduct<Vector3<T>> for T {
 impl CrossProduct<Vector> for Real {
     type Result = Vector;
 
-    fn gcross(&self, _rhs: Vector) -> Self::Result {
-        todo!("This isn't really used by rapier")
+    fn gcross(&self, rhs: Vector) -> Self::Result {
+        Vector::new(-rhs.y * *self, rhs.x * *self, 0.0)
     }
 }
 

@@ -161,8 +161,21 @@ impl MultibodyJoint {
                     );
                 }
             }
+            // naofarm: the release left this arm a stub. Two free angular
+            // DoFs move as the ball joint below with the locked axis's
+            // angular velocity held at zero: the joint frame's angular
+            // velocity is the free axes' rates, integrated into the
+            // rotation, and each free coordinate integrates its own rate.
+            #[cfg(feature = "dim3")]
             2 => {
-                todo!()
+                let mut angvel = Vector::ZERO;
+                for (k, dof_id) in free_ang_axes(locked_ang_bits).enumerate() {
+                    let rate = vels[curr_free_dof + k];
+                    angvel[dof_id] = rate;
+                    self.coords[DIM + dof_id] += rate * dt;
+                }
+                let disp = Rotation::from_scaled_axis(angvel * dt);
+                self.joint_rot = disp * self.joint_rot;
             }
             #[cfg(feature = "dim3")]
             3 => {
@@ -214,8 +227,15 @@ impl MultibodyJoint {
                         .copy_from_slice(rotmat.col(dof_id).as_ref());
                 }
             }
+            // naofarm: a stub in the release; each free angular axis's
+            // column, as the ball joint's below (see `integrate`).
+            #[cfg(feature = "dim3")]
             2 => {
-                todo!()
+                let rotmat = transform.to_mat();
+                for (k, dof_id) in free_ang_axes(locked_ang_bits).enumerate() {
+                    out.fixed_view_mut::<ANG_DIM, 1>(DIM, curr_free_dof + k)
+                        .copy_from_slice(rotmat.col(dof_id).as_ref());
+                }
             }
             #[cfg(feature = "dim3")]
             3 => {
@@ -256,8 +276,12 @@ impl MultibodyJoint {
                     result.angvel[dof_id] += acc[curr_free_dof];
                 }
             }
+            // naofarm: a stub in the release; as `integrate`.
+            #[cfg(feature = "dim3")]
             2 => {
-                todo!()
+                for (k, dof_id) in free_ang_axes(locked_ang_bits).enumerate() {
+                    result.angvel[dof_id] += acc[curr_free_dof + k];
+                }
             }
             #[cfg(feature = "dim3")]
             3 => {
@@ -383,20 +407,10 @@ impl MultibodyJoint {
             }
         }
 
-        /*
-        let locked_ang_bits = locked_bits >> DIM;
-        let num_free_ang_dofs = ANG_DIM - locked_ang_bits.count_ones() as usize;
-        match num_free_ang_dofs {
-            0 => { /* No free dofs. */ }
-            1 => {}
-            2 => {
-                todo!()
-            }
-            3 => {}
-            _ => unreachable!(),
-        }
-         */
-        // TODO: we should make special cases for multi-angular-dofs limits/motors
+        // Each free angular axis gets its own limit, motor and friction rows
+        // on its own coordinate, whatever the number of free angular DoFs.
+        // (naofarm: the release's commented-out dispatch, a stub,
+        // is left out.)
         for i in DIM..SPATIAL_DIM {
             if (locked_bits & (1 << i)) == 0 {
                 let limits = if (limit_bits & (1 << i)) != 0 {
@@ -459,4 +473,11 @@ impl MultibodyJoint {
 
         num_constraints
     }
+}
+
+/// The free angular axes (0 x, 1 y, 2 z), in order, for the locked angular
+/// bits `locked_ang_bits` (naofarm: for the two-free-DoF case).
+#[cfg(feature = "dim3")]
+fn free_ang_axes(locked_ang_bits: u8) -> impl Iterator<Item = usize> {
+    (0..ANG_DIM).filter(move |i| locked_ang_bits & (1 << i) == 0)
 }
