@@ -121,12 +121,10 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     let results: Vec<_> = runs.iter().map(|t| t.measurement).collect();
     let s = stats(&results);
     let diverged = runs.iter().filter(|t| t.diverged).count();
-    let planned = trial::planned_travel_m(robot_type, &values, duration, engine)
+    let planned = trial::planned_travel_m(robot_type, &values, duration)
         .map_err(|e| Failure::Job(e.into()))?;
-    let step =
-        trial::planned_step_m(robot_type, &values, engine).map_err(|e| Failure::Job(e.into()))?;
-    let reach =
-        trial::reach_step_m(robot_type, &values, engine).map_err(|e| Failure::Job(e.into()))?;
+    let step = trial::planned_step_m(robot_type, &values).map_err(|e| Failure::Job(e.into()))?;
+    let reach = trial::reach_step_m(robot_type, &values).map_err(|e| Failure::Job(e.into()))?;
     // Over the trials that did not fall, the ones mx averages.
     let split = Footwork::mean(
         runs.iter()

@@ -44,14 +44,9 @@ pub fn planned_x_m(req: &TrialRequest) -> Result<Option<f64>, TrialError> {
     let params = params_of(req)?;
     match req.model {
         TrialModel::Synthetic => Ok(None),
-        TrialModel::Nao => nao::trial::planned_travel_m(
-            req.robot_type,
-            &params,
-            req.duration_s,
-            nao::trial::Engine::WALK,
-        )
-        .map(Some)
-        .map_err(|e| TrialError::Model(e.to_string())),
+        TrialModel::Nao => nao::trial::planned_travel_m(req.robot_type, &params, req.duration_s)
+            .map(Some)
+            .map_err(|e| TrialError::Model(e.to_string())),
     }
 }
 
@@ -62,11 +57,9 @@ pub fn planned_step_m(req: &TrialRequest) -> Result<Option<f64>, TrialError> {
     let params = params_of(req)?;
     match req.model {
         TrialModel::Synthetic => Ok(None),
-        TrialModel::Nao => {
-            nao::trial::planned_step_m(req.robot_type, &params, nao::trial::Engine::WALK)
-                .map(Some)
-                .map_err(|e| TrialError::Model(e.to_string()))
-        }
+        TrialModel::Nao => nao::trial::planned_step_m(req.robot_type, &params)
+            .map(Some)
+            .map_err(|e| TrialError::Model(e.to_string())),
     }
 }
 

@@ -59,7 +59,7 @@ fn seed_1_optim1(exp: &Experiment) -> ParamValues {
 fn walks_as_planned_within_the_stops(what: &str, p: &ParamValues, least: (f64, f64)) -> (f64, f64) {
     let ts = from_777(p, 100, Engine::WALK);
     let (s, mx, my) = table(&ts);
-    let planned = trial::planned_travel_m(0, p, 10.0, Engine::WALK).expect("a plan");
+    let planned = trial::planned_travel_m(0, p, 10.0).expect("a plan");
     let worst = worst_stop_deg(&ts);
     println!("{what}: s {s}, mx {mx:?} m of {planned:.3} m planned, my {my:?}, stops {worst:.3}°");
     assert!(s >= least.0 && mx >= least.1, "{what}: s {s}, mx {mx}");

@@ -27,8 +27,6 @@ use protocol::params::ParamValues;
 /// balanced from the robot's sensors ([`super::balance`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Engine {
-    /// The plan's constants.
-    pub gait: GaitConfig,
     /// Whether the balance and the step gauge correct the plan (off: the
     /// plan played as it is, to measure what the feedback carries).
     pub feedback: bool,
@@ -42,18 +40,12 @@ impl Default for Engine {
 
 impl Engine {
     /// The walk naofarm ships.
-    pub const WALK: Self = Self {
-        gait: GaitConfig::ENGINE,
-        feedback: true,
-    };
+    pub const WALK: Self = Self { feedback: true };
 
     /// The same plan with the feedback switched off.
     #[must_use]
     pub fn without_feedback(self) -> Self {
-        Self {
-            feedback: false,
-            ..self
-        }
+        Self { feedback: false }
     }
 }
 
@@ -222,36 +214,24 @@ pub fn planned_travel_m(
     robot_type: u8,
     params: &ParamValues,
     duration_s: f64,
-    engine: Engine,
 ) -> Result<f64, NaoTrialError> {
-    let cfg = engine.gait.with_params(params);
+    let cfg = GaitConfig::ENGINE.with_params(params);
     let gait = plan(robot_type, params, params.walk(), duration_s, cfg)?;
     Ok(gait.state(duration_s).hip[0] - gait.state(0.0).hip[0])
 }
 
 /// The full step the walk's plan takes, m: `xlength_step_max`, or shorter
-/// where the engine's `step_reach` caps it ([`super::walk::reachable_step`]).
-pub fn planned_step_m(
-    robot_type: u8,
-    params: &ParamValues,
-    engine: Engine,
-) -> Result<f64, NaoTrialError> {
-    let cfg = engine.gait.with_params(params);
+/// where the legs cannot swing it in time ([`super::walk::reachable_step`]).
+pub fn planned_step_m(robot_type: u8, params: &ParamValues) -> Result<f64, NaoTrialError> {
+    let cfg = GaitConfig::ENGINE.with_params(params);
     Ok(plan(robot_type, params, params.walk(), 0.0, cfg)?.step_length())
 }
 
 /// The longest step the legs swing in time under the hip pitch's speed cap,
 /// m: the step the engine plans for an unbounded ask
 /// ([`super::walk::reachable_step`]).
-pub fn reach_step_m(
-    robot_type: u8,
-    params: &ParamValues,
-    engine: Engine,
-) -> Result<f64, NaoTrialError> {
-    let cfg = GaitConfig {
-        step_reach: 1.0,
-        ..engine.gait.with_params(params)
-    };
+pub fn reach_step_m(robot_type: u8, params: &ParamValues) -> Result<f64, NaoTrialError> {
+    let cfg = GaitConfig::ENGINE.with_params(params);
     let unbounded = WalkParams {
         step_length: f64::INFINITY,
         ..params.walk()
@@ -295,7 +275,7 @@ pub fn run_observed(
 ) -> Result<NaoTrial, NaoTrialError> {
     let model = NaoModel::with_params(robot_type, params)?;
     let walk: WalkParams = params.walk();
-    let cfg = engine.gait.with_params(params);
+    let cfg = GaitConfig::ENGINE.with_params(params);
     let gait = Gait::with_config(&model, walk, duration_s, cfg);
     let mut balance = engine.feedback.then(Balance::new);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
