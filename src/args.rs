@@ -140,6 +140,8 @@ pub enum Command {
     Clop(ClopArgs),
     /// Follow a run from any machine (live view or JSON lines); without RUN, list the runs.
     Watch(WatchArgs),
+    /// Serve a live web page of the fleet: every run, worker and figure.
+    Web(WebArgs),
     /// Print a run's decided history H (iteration, p, s, mx, my, ex, ey, decision, best).
     History {
         /// The run directory.
@@ -275,6 +277,12 @@ pub struct FleetBenchArgs {
     /// Give up after this many seconds.
     #[arg(long, default_value_t = 1800)]
     pub timeout_s: u64,
+    /// Run the bench twice, the second time with `naofarm web` serving an
+    /// open page (its feed read, its run data and a figure fetched as they
+    /// change): the page server's CPU and the coordinators' CPU per trial
+    /// with and without it.
+    #[arg(long)]
+    pub web: bool,
     /// Machine-readable output.
     #[arg(long)]
     pub json: bool,
@@ -524,6 +532,20 @@ pub struct ClopArgs {
     /// Machine-readable output.
     #[arg(long)]
     pub json: bool,
+}
+
+/// Arguments of `web`.
+#[derive(Args, Debug)]
+pub struct WebArgs {
+    #[command(flatten)]
+    pub net: NetArgs,
+    /// The page's address (HTTP); another than loopback only when asked.
+    #[arg(long, value_name = "ADDR", default_value = "127.0.0.1:8080")]
+    pub http: std::net::SocketAddr,
+    /// Let the page pause, resume, stop and re-prioritise runs. With
+    /// `--tls DIR`, control goes through DIR's coordinator certificate.
+    #[arg(long)]
+    pub control: bool,
 }
 
 /// Arguments of `watch`.

@@ -104,6 +104,16 @@ impl Crew {
         }
     }
 
+    /// The process id of `member`, while it is one of the crew.
+    pub fn pid(&self, member: &Member) -> Option<u32> {
+        let inner = self.lock();
+        inner
+            .children
+            .iter()
+            .find(|(id, _)| *id == member.id)
+            .map(|(_, c)| c.id())
+    }
+
     /// Kills and reaps `member` (if it has not ended); it leaves the crew.
     pub fn kill(&self, member: &Member) {
         let mut inner = self.lock();

@@ -30,13 +30,16 @@ fn main() -> ExitCode {
     let args = args::Cli::parse();
     if matches!(
         args.command,
-        Command::Coordinator { .. } | Command::Worker { .. }
+        Command::Coordinator { .. } | Command::Worker { .. } | Command::Web(_)
     ) {
         compact_zenoh_runtime();
     }
     if matches!(
         args.command,
-        Command::Coordinator { .. } | Command::Worker { .. } | Command::Router { .. }
+        Command::Coordinator { .. }
+            | Command::Worker { .. }
+            | Command::Router { .. }
+            | Command::Web(_)
     ) {
         serve::watch_stdin();
     }
@@ -121,6 +124,7 @@ fn dispatch(cli: Cli) -> Result<(), Failure> {
             timeout_s,
         } => commands::ctl::ctl(&run, &action, &net, timeout_s),
         Command::Watch(a) => commands::watch::watch(&a),
+        Command::Web(a) => commands::web::web(&a),
         Command::Clop(a) => commands::clop::clop(&a),
         Command::History { dir, json, csv } => commands::history::history(&dir, json, csv),
         Command::Report {

@@ -368,24 +368,25 @@ worker      ingress put                                runs/outcomes runs/failur
 worker      ingress query                              runs/work
 worker      egress  reply                              runs/work
 worker      ingress liveliness_token                   @workers/*
+worker      ingress put                                @workers/*/status
 worker      ingress declare_subscriber                 runs/ad
 worker      egress  put                                runs/ad
 coordinator ingress declare_subscriber                 runs/outcomes runs/failures runs/presence
 coordinator egress  put                                runs/outcomes runs/failures runs/presence
-coordinator ingress declare_queryable,reply            runs/work runs/ctl pub/status pub/history
-coordinator egress  query                              runs/work runs/ctl pub/status pub/history
+coordinator ingress declare_queryable,reply            runs/work runs/ctl pub/status pub/history pub/experiment
+coordinator egress  query                              runs/work runs/ctl pub/status pub/history pub/experiment
 coordinator ingress put                                runs/ad pub/params/* pub/trials/** pub/results/* pub/status
 coordinator ingress liveliness_token,liveliness_query  @coordinators/*
 coordinator egress  liveliness_token                   @coordinators/* @workers/*
 coordinator ingress declare_liveliness_subscriber      @workers/*
 coordinator ingress query                              runs/ctl pub/status
 coordinator egress  reply                              runs/ctl pub/status
-watcher     ingress declare_subscriber                 pub/params/* pub/trials/** pub/results/* pub/status
-watcher     egress  put                                pub/params/* pub/trials/** pub/results/* pub/status
-watcher     ingress query                              pub/status pub/history
-watcher     egress  reply                              pub/status pub/history
-watcher     ingress declare_liveliness_subscriber      @coordinators/*
-watcher     egress  liveliness_token                   @coordinators/*
+watcher     ingress declare_subscriber                 pub/params/* pub/trials/** pub/results/* pub/status @workers/*/status
+watcher     egress  put                                pub/params/* pub/trials/** pub/results/* pub/status @workers/*/status
+watcher     ingress query                              pub/status pub/history pub/experiment
+watcher     egress  reply                              pub/status pub/history pub/experiment
+watcher     ingress declare_liveliness_subscriber      @coordinators/* @workers/*
+watcher     egress  liveliness_token                   @coordinators/* @workers/*
 ";
 
 /// [`ACL_RULES`] as zenoh's `access_control` configuration (JSON), under `prefix`.

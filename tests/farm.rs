@@ -671,6 +671,12 @@ fn conforms(
             "integer" => value.is_u64(),
             "number" => value.is_number(),
             "boolean" => value.is_boolean(),
+            "reasons" => value.as_array().is_some_and(|a| {
+                a.iter().all(|p| {
+                    p.as_array()
+                        .is_some_and(|p| p.len() == 2 && p[0].is_string() && p[1].is_u64())
+                })
+            }),
             "pairs" => value.as_array().is_some_and(|a| {
                 a.iter().all(|p| {
                     p.as_array()
@@ -711,6 +717,7 @@ fn every_topic_matches_the_readme_field_tables() {
         "RunStatus",
         "Stats",
         "Best",
+        "WorkerStatus",
     ] {
         assert!(
             schemas.contains_key(s),
@@ -735,6 +742,14 @@ fn every_topic_matches_the_readme_field_tables() {
         })
         .wait()
         .unwrap();
+    let (wtx, wrx) = mpsc::channel();
+    let _workers = session
+        .declare_subscriber("naofarm/@workers/*/status")
+        .callback(move |s| {
+            let _ = wtx.send(String::from_utf8_lossy(&s.payload().to_bytes()).into_owned());
+        })
+        .wait()
+        .unwrap();
     // The coordinator answers its status query once the session is up;
     // only then start the worker, so that no message is published unseen.
     let ask_deadline = Instant::now() + TIMEOUT;
@@ -756,6 +771,10 @@ fn every_topic_matches_the_readme_field_tables() {
     conforms(&schemas, "RunStatus", &status).unwrap();
     let mut ws = vec![worker(port, 2, 5)];
     c.wait_decided(4);
+    // A worker says every second how it stands.
+    let w: serde_json::Value = serde_json::from_str(&wrx.recv_timeout(TIMEOUT).unwrap()).unwrap();
+    conforms(&schemas, "WorkerStatus", &w).unwrap();
+    assert_eq!(w["slots"], 2, "{w}");
     let history = ask("naofarm/farm/*/history".to_string());
     let rows = history.as_array().expect("the history is an array");
     assert!(rows.len() >= 4);
@@ -803,6 +822,59 @@ fn every_topic_matches_the_readme_field_tables() {
     let mut bad = history[0].clone();
     bad["stats"]["undocumented"] = serde_json::json!(1);
     assert!(conforms(&schemas, "IterationResult", &bad).is_err());
+}
+
+/// A history far longer than one reply may carry (the coordinator answers
+/// in parts of 25): a late watcher gets all of it, and the coordinator's
+/// link holds. One reply of the whole history once outgrew the link's queue
+/// and zenoh closed the coordinator's link instead.
+#[test]
+fn a_long_history_reaches_a_late_watcher_whole() {
+    let dir = scratch("long-history");
+    let exp = experiment(&dir, 400);
+    let out = dir.join("run");
+    succeed(
+        naofarm()
+            .args(["run", "--workers", "2", "--iterations", "300"])
+            .arg(&exp)
+            .arg("--out")
+            .arg(&out),
+    );
+    // Extended to 400 iterations and served with no worker: it stays up.
+    let c = Coordinator::start(&exp, &out, 30.0);
+    let mut watcher = naofarm()
+        .args(["watch", "farm", "--json", "--connect"])
+        .arg(format!("tcp/127.0.0.1:{}", c.port))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let (tx, rx) = mpsc::channel();
+    let stdout = watcher.stdout.take().unwrap();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    let deadline = Instant::now() + TIMEOUT;
+    let mut iterations = std::collections::BTreeSet::new();
+    while iterations.len() < 300 {
+        let left = deadline.saturating_duration_since(Instant::now());
+        let line = rx
+            .recv_timeout(left)
+            .unwrap_or_else(|_| panic!("only {} of 300 iterations arrived", iterations.len()));
+        let v: serde_json::Value = serde_json::from_str(&line).unwrap();
+        if v["event"] == "history" {
+            assert!(iterations.insert(v["result"]["iteration"].as_u64().unwrap()));
+        }
+    }
+    let _ = watcher.kill();
+    let _ = watcher.wait();
+    assert_eq!(iterations.last(), Some(&299));
+    let log = std::fs::read_to_string(&c.stderr).unwrap();
+    assert!(!log.contains("Closing transport"), "{log}");
 }
 
 #[test]

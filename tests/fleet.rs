@@ -547,6 +547,11 @@ fn the_router_lets_each_role_say_only_its_part() {
         put(&worker, "naofarm/x/r1/status", "forged by a worker");
         put(&worker, "naofarm/@runs/r1/presence", "heartbeat");
     });
+    // A worker's status reaches watchers (the web page's worker list).
+    let (_workers, wsrx) = heard(&watcher, "naofarm/@workers/*/status");
+    until(&wsrx, "w1 status", &|| {
+        put(&worker, "naofarm/@workers/w1/status", "w1 status");
+    });
     // Once the coordinator's next status has arrived too, no forged one has.
     let seen = until(&srx, "real 2", &|| {
         put(&publisher, "naofarm/x/r1/status", "real 2");

@@ -41,7 +41,7 @@ mod handlers;
 pub use handlers::PLAUSIBLE_DISTANCE_M;
 use handlers::{
     no_worker_fits, on_ctl, on_failure, on_outcome, on_reply, on_work, publish, put_json,
-    reply_json,
+    reply_history, reply_json,
 };
 
 /// Settings of the coordinator service.
@@ -82,6 +82,9 @@ pub struct Counters {
     pub set_aside: Vec<String>,
     /// Refused messages per reason.
     pub refused_reasons: BTreeMap<String, u64>,
+    /// Trials failed or given back by workers, per reason (at most 64
+    /// reasons; further ones are counted under "other reasons").
+    pub failure_reasons: BTreeMap<String, u64>,
     /// Ready → handed to a worker, ms, per trial (the first 100,000).
     pub dispatch_ms: Vec<f32>,
     /// Seconds spent applying outcomes to the run (journal, pickOut, CLOP's fit and draw).
@@ -249,7 +252,20 @@ impl State {
             workers: u32::try_from(self.sched.workers()).unwrap_or(u32::MAX),
             trials_per_s: rate,
             finished: self.snap.finished,
+            failures: protocol::wire::reason_counts(&self.counters.failure_reasons),
+            refused: protocol::wire::reason_counts(&self.counters.refused_reasons),
         }
+    }
+
+    /// Counts a trial that a worker failed or gave back, by reason.
+    fn count_failure(&mut self, reason: String) {
+        let map = &mut self.counters.failure_reasons;
+        let key = if map.len() < 64 || map.contains_key(&reason) {
+            reason
+        } else {
+            "other reasons".to_string()
+        };
+        *map.entry(key).or_default() += 1;
     }
 
     fn state(&self) -> RunState {
@@ -342,6 +358,7 @@ impl State {
             .or_default()
             .insert(id.to_string());
         self.counters.failures += 1;
+        self.count_failure(reason.to_string());
         self.counters.redispatched += 1;
         self.sched.failed(t, Instant::now());
         self.send(Cmd::Failure {
@@ -438,6 +455,7 @@ pub async fn serve(
         ctl_q: queryable(fkeys.ctl()).await?,
         status_q: queryable(rkeys.status()).await?,
         history_q: queryable(rkeys.history()).await?,
+        experiment_q: queryable(rkeys.experiment()).await?,
     };
     let _token = session
         .liveliness()
@@ -550,6 +568,7 @@ struct Subscriptions {
     ctl_q: zenoh::query::Queryable<zenoh::handlers::FifoChannelHandler<zenoh::query::Query>>,
     status_q: zenoh::query::Queryable<zenoh::handlers::FifoChannelHandler<zenoh::query::Query>>,
     history_q: zenoh::query::Queryable<zenoh::handlers::FifoChannelHandler<zenoh::query::Query>>,
+    experiment_q: zenoh::query::Queryable<zenoh::handlers::FifoChannelHandler<zenoh::query::Query>>,
 }
 
 #[allow(clippy::too_many_lines)]
@@ -635,7 +654,11 @@ async fn serve_loop(
             }
             q = subs.history_q.recv_async() => {
                 let q = q.map_err(zerr)?;
-                reply_json(&q, serde_json::to_string(&st.history).map_err(|e| e.to_string())).await;
+                reply_history(&q, &st.history).await;
+            }
+            q = subs.experiment_q.recv_async() => {
+                let q = q.map_err(zerr)?;
+                reply_json(&q, serde_json::to_string(&st.facts.experiment).map_err(|e| e.to_string())).await;
             }
             _ = tick.tick() => {
                 let now = Instant::now();

@@ -88,6 +88,18 @@ impl RunKeys {
     pub fn history(&self) -> String {
         format!("{}/history", self.base)
     }
+
+    /// `…/experiment`: the run's experiment as parsed (queryable).
+    #[must_use]
+    pub fn experiment(&self) -> String {
+        format!("{}/experiment", self.base)
+    }
+}
+
+/// `<prefix>/*/*/results/*`: every result of every run.
+#[must_use]
+pub fn results_all(prefix: &str) -> String {
+    format!("{prefix}/*/*/results/*")
 }
 
 /// `<prefix>/*/*/status`: the status of every run.
@@ -167,6 +179,24 @@ pub fn workers_all(prefix: &str) -> String {
     format!("{prefix}/@workers/*")
 }
 
+/// `<prefix>/@workers/<worker-id>/status`: a worker's public status (JSON).
+#[must_use]
+pub fn worker_status(prefix: &str, worker_id: &str) -> String {
+    format!("{prefix}/@workers/{worker_id}/status")
+}
+
+/// `<prefix>/@workers/*/status`: every worker's public status.
+#[must_use]
+pub fn worker_statuses_all(prefix: &str) -> String {
+    format!("{prefix}/@workers/*/status")
+}
+
+/// `<prefix>/@coordinators/*`: every coordinator's liveliness token.
+#[must_use]
+pub fn coordinators_all(prefix: &str) -> String {
+    format!("{prefix}/@coordinators/*")
+}
+
 /// `<prefix>/@coordinators/<id>`: the liveliness token of a run's
 /// coordinator (watchers notice a coordinator that stopped; a second
 /// coordinator claiming the same run id is refused).
@@ -198,6 +228,12 @@ mod tests {
         assert_eq!(adverts_all("naofarm"), "naofarm/@runs/*/ad");
         assert_eq!(worker("naofarm", "abc"), "naofarm/@workers/abc");
         assert_eq!(last_chunk("naofarm/@workers/abc"), "abc");
+        assert_eq!(
+            worker_status("naofarm", "abc"),
+            "naofarm/@workers/abc/status"
+        );
+        assert_eq!(k.experiment(), "naofarm/r1/u-1/experiment");
+        assert_eq!(results_all("naofarm"), "naofarm/*/*/results/*");
     }
 
     #[test]

@@ -18,7 +18,7 @@ use crate::{
 /// carry (the parameter registry's names and a trial request's physics):
 /// a decoder of another version refuses the message by its envelope, so
 /// workers of two builds never serve one run with different walks.
-pub const WIRE_VERSION: u8 = 21;
+pub const WIRE_VERSION: u8 = 22;
 /// Largest message accepted, in bytes (checked before any allocation).
 pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
 const MAGIC: [u8; 2] = *b"NF";
@@ -757,6 +757,64 @@ pub struct RunStatus {
     pub trials_per_s: f64,
     /// Whether every planned iteration is decided.
     pub finished: bool,
+    /// Trials that failed on a worker or that a worker gave back, by reason
+    /// (at most [`MAX_REASONS`]; the rest counted under "other reasons").
+    #[serde(default)]
+    pub failures: Vec<(String, u64)>,
+    /// Messages the coordinator refused (undecodable, for another run, not
+    /// asked for, a forged or late answer), by reason, as `failures`.
+    #[serde(default)]
+    pub refused: Vec<(String, u64)>,
+}
+
+/// Most reasons a [`RunStatus`] lists in `failures` or `refused`.
+pub const MAX_REASONS: usize = 16;
+/// Longest reason a [`RunStatus`] lists, bytes.
+pub const MAX_REASON_LEN: usize = 240;
+
+/// Counts by reason as a status lists them: the most frequent
+/// [`MAX_REASONS`] − 1 reasons, each cut to [`MAX_REASON_LEN`] bytes, and
+/// the rest summed under "other reasons".
+#[must_use]
+pub fn reason_counts<'a>(
+    counts: impl IntoIterator<Item = (&'a String, &'a u64)>,
+) -> Vec<(String, u64)> {
+    let mut all: Vec<(String, u64)> = counts
+        .into_iter()
+        .map(|(r, n)| (cut(r, MAX_REASON_LEN), *n))
+        .collect();
+    all.sort_by(|a, b| b.1.cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
+    if all.len() > MAX_REASONS {
+        let rest: u64 = all[MAX_REASONS - 1..].iter().map(|(_, n)| n).sum();
+        all.truncate(MAX_REASONS - 1);
+        all.push(("other reasons".into(), rest));
+    }
+    all
+}
+
+/// `s` cut to at most `max` bytes on a character boundary.
+fn cut(s: &str, max: usize) -> String {
+    let mut end = s.len().min(max);
+    while !s.is_char_boundary(end) {
+        end -= 1;
+    }
+    s[..end].to_string()
+}
+
+fn reasons(field: &'static str, list: &[(String, u64)]) -> Check {
+    if list.len() > MAX_REASONS {
+        return Err((
+            field,
+            format!("{} reasons, at most {MAX_REASONS}", list.len()),
+        ));
+    }
+    match list.iter().find(|(r, _)| r.len() > MAX_REASON_LEN) {
+        Some(_) => Err((
+            field,
+            format!("a reason longer than {MAX_REASON_LEN} bytes"),
+        )),
+        None => Ok(()),
+    }
 }
 
 impl WireMessage for RunStatus {
@@ -782,7 +840,92 @@ impl WireMessage for RunStatus {
             param_list("best.params", &b.params)?;
             b.stats.check()?;
         }
+        reasons("failures", &self.failures)?;
+        reasons("refused", &self.refused)?;
         finite("trials_per_s", self.trials_per_s)
+    }
+}
+
+/// Iterations per reply of a run's `history` query: a long history is
+/// answered in parts, so that no one reply outgrows the link's queue.
+pub const HISTORY_PART: usize = 25;
+
+/// A run's history from the replies to its `history` query (each a JSON
+/// array of [`IterationResult`]s, in any order, possibly overlapping): every
+/// iteration once, in order.
+pub fn history_from_parts(parts: &[String]) -> Result<Vec<IterationResult>, DecodeError> {
+    let mut all: std::collections::BTreeMap<u64, IterationResult> =
+        std::collections::BTreeMap::new();
+    for part in parts {
+        let rows: Vec<IterationResult> =
+            serde_json::from_str(part).map_err(|e| DecodeError::Body {
+                message: "history",
+                detail: e.to_string(),
+            })?;
+        for r in rows {
+            let r = r.checked()?;
+            all.insert(r.iteration, r);
+        }
+    }
+    Ok(all.into_values().collect())
+}
+
+/// A worker's public status, for watchers (JSON on
+/// `<prefix>/@workers/<id>/status`, published every second).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WorkerStatus {
+    /// Worker id (a UUID).
+    pub worker: String,
+    /// The host it runs on (its hostname).
+    pub host: String,
+    /// Trials it runs at once.
+    pub slots: u32,
+    /// Trials it holds now.
+    pub busy: u32,
+    /// Its fingerprint (`naofarm fingerprint`), 16 hex digits.
+    pub fingerprint: String,
+    /// naofarm version of the worker.
+    pub version: String,
+    /// The runs whose trials it holds now: run id and trials held.
+    pub runs: Vec<(String, u32)>,
+    /// Trials it ran and reported since it started.
+    pub trials: u64,
+    /// Trials it failed or gave back since it started.
+    pub refused: u64,
+}
+
+impl WireMessage for WorkerStatus {
+    const NAME: &'static str = "WorkerStatus";
+    const KIND: u8 = 11;
+    fn validate(&self) -> Check {
+        chunk("worker", &self.worker)?;
+        if self.host.is_empty() || self.host.len() > 253 || self.host.chars().any(char::is_control)
+        {
+            return Err(("host", "not a host name of 1 to 253 printable bytes".into()));
+        }
+        if self.slots == 0 || self.slots > 4096 {
+            return Err(("slots", format!("{} is not in 1..=4096", self.slots)));
+        }
+        if self.busy > self.slots {
+            return Err(("busy", "more busy slots than slots".into()));
+        }
+        if self.fingerprint.len() != 16 || !self.fingerprint.chars().all(|c| c.is_ascii_hexdigit())
+        {
+            return Err(("fingerprint", "not 16 hex digits".into()));
+        }
+        if self.version.len() > 64 {
+            return Err(("version", "longer than 64 bytes".into()));
+        }
+        if self.runs.len() > 4096 {
+            return Err(("runs", "more than 4096 runs".into()));
+        }
+        for (run, _) in &self.runs {
+            chunk("runs", run)?;
+        }
+        if self.runs.iter().map(|(_, n)| u64::from(*n)).sum::<u64>() > u64::from(self.busy) {
+            return Err(("runs", "more trials held than busy slots".into()));
+        }
+        Ok(())
     }
 }
 
@@ -852,7 +995,8 @@ mod tests {
             let p = WorkerPresence { worker: w.clone(), slots, busy: slots / 2, version: "0.1.0".into() };
             prop_assert_eq!(WorkerPresence::decode(&p.encode().unwrap()), Ok(p));
             let s = RunStatus { run: w.clone(), id: format!("{w}-id"), priority: 2, state: RunState::Running, planned: 500, opened: a + e + r + 2, decided: a + e + r, accepts: a,
-                                equivalents: e, rejects: r, best: None, optim2: ps, optim2_decided: a + e + r, workers: 3, trials_per_s: 1.5, finished: false };
+                                equivalents: e, rejects: r, best: None, optim2: ps, optim2_decided: a + e + r, workers: 3, trials_per_s: 1.5, finished: false,
+                                failures: vec![("panic: x".into(), a)], refused: Vec::new() };
             prop_assert_eq!(RunStatus::decode(&s.encode().unwrap()), Ok(s.clone()));
             prop_assert_eq!(RunStatus::from_json(&s.to_json().unwrap()), Ok(s));
         }

@@ -18,6 +18,8 @@ use std::{
 use anyhow::{anyhow, Context};
 use zenoh::Wait;
 
+mod page;
+
 use crate::{
     args::FleetBenchArgs,
     common::{flag_in, Failure},
@@ -179,6 +181,8 @@ struct Report {
     worst_share_error: f64,
     worst_fair_share_error: f64,
     per_run: Vec<RunRow>,
+    /// The web page's server, when the page was open.
+    page: Option<page::PageRow>,
 }
 
 /// `naofarm bench fleet`.
@@ -198,11 +202,19 @@ pub fn fleet(a: &FleetBenchArgs) -> Result<(), Failure> {
     for &p in &a.priorities {
         flag_in("--priorities", p, 1..=1000)?;
     }
-    run(a).map_err(Failure::Job)
+    let mut reports = Vec::new();
+    for page in if a.web {
+        vec![false, true]
+    } else {
+        vec![false]
+    } {
+        reports.push(run(a, page).map_err(Failure::Job)?);
+    }
+    show(a, &reports).map_err(Failure::Job)
 }
 
 #[allow(clippy::too_many_lines, clippy::cast_precision_loss)]
-fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
+fn run(a: &FleetBenchArgs, open_page: bool) -> anyhow::Result<Report> {
     let exe = std::env::current_exe()?;
     let base = a.dir.clone().unwrap_or_else(|| {
         let shm = std::path::Path::new("/dev/shm");
@@ -285,6 +297,11 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
         .wait()
         .map_err(|e| anyhow!("zenoh: {e}"))?;
 
+    let page = if open_page {
+        Some(page::Page::open(&exe, &crew, &ep)?)
+    } else {
+        None
+    };
     let mut coords = Vec::new();
     let (tx, rx) = mpsc::channel::<(usize, serde_json::Value)>();
     for i in 0..a.runs {
@@ -328,6 +345,8 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
         }
     }
     let started = Instant::now();
+    let page_from = page.as_ref().map(page::Page::cpu_s).transpose()?;
+    let mut page_to = None;
     drop(tx);
     eprintln!("{} runs started; waiting for them to finish…", a.runs);
     let mut finished: Vec<Option<serde_json::Value>> = vec![None; a.runs];
@@ -337,7 +356,10 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
         let left = deadline.saturating_duration_since(Instant::now());
         match rx.recv_timeout(left) {
             Ok((i, v)) => {
-                first_done.get_or_insert_with(Instant::now);
+                if first_done.is_none() {
+                    first_done = Some(Instant::now());
+                    page_to = page.as_ref().map(page::Page::cpu_s).transpose()?;
+                }
                 finished[i] = Some(v);
             }
             Err(mpsc::RecvTimeoutError::Timeout) => {
@@ -358,6 +380,13 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
     for (c, _) in &coords {
         crew.wait(c)?;
     }
+    let page_row = match (&page, page_from, page_to, first_done) {
+        (Some(p), Some(a), Some(b), Some(done)) => {
+            Some(p.row(b - a, done.saturating_duration_since(started)))
+        }
+        _ => None,
+    };
+    drop(page);
     drop(crew);
     let _ = session.close().wait();
     let from = started + Duration::from_millis(2 * a.trial_ms);
@@ -495,13 +524,52 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
         worst_share_error: worst,
         worst_fair_share_error: worst_fair,
         per_run,
+        page: page_row,
     };
+    Ok(report)
+}
+
+/// Prints the bench's reports (without and with the page open, for `--web`).
+fn show(a: &FleetBenchArgs, reports: &[Report]) -> anyhow::Result<()> {
     if a.json {
-        crate::common::emit(&format!("{}\n", serde_json::to_string_pretty(&report)?))
+        let v = match reports {
+            [one] => serde_json::to_value(one)?,
+            many => serde_json::json!({ "without_page": many.first(), "with_page": many.get(1) }),
+        };
+        crate::common::emit(&format!("{}\n", serde_json::to_string_pretty(&v)?))
             .map_err(|_| anyhow!("output"))?;
         return Ok(());
     }
-    let mut out = format!(
+    let mut all = String::new();
+    for report in reports {
+        all += &text(report);
+    }
+    if let [without, with] = reports {
+        if let Some(p) = &with.page {
+            all += &format!(
+                "the web page open: its server {:.2} % of one core ({} feed events, {} page fetches); \
+                 coordinator CPU {:.3} ms/trial without the page, {:.3} ms/trial with it ({:+.1} %)\n",
+                p.cpu_percent,
+                p.events,
+                p.fetches,
+                without.coordinator_cpu_ms_per_trial,
+                with.coordinator_cpu_ms_per_trial,
+                (with.coordinator_cpu_ms_per_trial / without.coordinator_cpu_ms_per_trial - 1.0) * 100.0
+            );
+        }
+    }
+    crate::common::emit(&all).map_err(|_| anyhow!("output"))
+}
+
+/// One report as text.
+fn text(report: &Report) -> String {
+    let page = report
+        .page
+        .as_ref()
+        .map_or("without the web page".to_string(), |_| {
+            "with the web page open".to_string()
+        });
+    let mut out = format!("{page}:\n") + &format!(
         "{} runs × {} workers × {} slots, trials of {} ms; window {:.1} s (every run with trials ready)\n\
          utilisation {:.1} %   {:.1} trials/s   dispatch latency p50 {:.1} ms, p99 {:.1} ms\n\
          coordinator CPU {:.3} ms/trial: service {:.3} ms/trial (zenoh, scheduling, topics) \
@@ -545,8 +613,7 @@ fn run(a: &FleetBenchArgs) -> anyhow::Result<()> {
             r.cpu_s
         );
     }
-    crate::common::emit(&out).map_err(|_| anyhow!("output"))?;
-    Ok(())
+    out
 }
 
 #[cfg(test)]

@@ -18,4 +18,5 @@ pub mod run;
 pub mod stand;
 pub mod trial;
 pub mod watch;
+pub mod web;
 pub mod worker;

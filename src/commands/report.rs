@@ -18,7 +18,7 @@ use worker::nao::{footwork::Footwork, sim::SimSettings, trial};
 use crate::common::{note_tail, usage_unless, Failure};
 use crate::render;
 
-mod figures;
+pub(crate) mod figures;
 use figures::{best_figure, decisions_figure, pair_figure, parameter_figure, progress_figure};
 
 /// The first seed of Table IV's trials (the seed of the paper's table runs).
@@ -258,8 +258,33 @@ fn table_iv(
     trials: u32,
     threads: usize,
 ) -> Result<Vec<Row>, Failure> {
-    let rows = crate::common::replay_run(dir)?.table_sets();
-    rows.into_iter()
+    rows_of(
+        exp,
+        crate::common::replay_run(dir)?.table_sets(),
+        trials,
+        threads,
+    )
+}
+
+/// Table IV of `sets` (Expert, Optim.1, Optim.2 as far as known) as
+/// Markdown: what the report writes, for the web page of a run that is over.
+pub(crate) fn table_markdown(
+    exp: &Experiment,
+    sets: Vec<(&'static str, Vec<f64>)>,
+    trials: u32,
+    threads: usize,
+) -> Result<String, Failure> {
+    let rows = rows_of(exp, sets, trials, threads)?;
+    Ok(table_text(exp, &rows, trials).0)
+}
+
+fn rows_of(
+    exp: &Experiment,
+    sets: Vec<(&'static str, Vec<f64>)>,
+    trials: u32,
+    threads: usize,
+) -> Result<Vec<Row>, Failure> {
+    sets.into_iter()
         .map(|(name, params)| {
             let runs = run_trials(exp, &params, trials, threads)?;
             let first = table_request(exp, &params, 0);
@@ -692,7 +717,7 @@ fn index_html(
 }
 
 /// The animated replay of trial seed [`TABLE_SEED`] of one parameter set.
-fn replay_svg(exp: &Experiment, params: &[f64], title: &str) -> Result<String, Failure> {
+pub(crate) fn replay_svg(exp: &Experiment, params: &[f64], title: &str) -> Result<String, Failure> {
     let named = exp.full_params(params);
     let values =
         ParamValues::from_named(&named).map_err(|e| Failure::Job(anyhow!("{title}: {e}")))?;

@@ -250,14 +250,9 @@ async fn follow(
             status.planned
         )));
     }
-    let history: Vec<IterationResult> = match query_until(session, &rkeys.history(), deadline)
-        .await?
-        .first()
-    {
-        Some(text) => serde_json::from_str::<Vec<IterationResult>>(text)
-            .map_err(|e| Failure::Job(anyhow!("the history answer does not parse: {e}")))?,
-        None => Vec::new(),
-    };
+    let parts = query_until(session, &rkeys.history(), deadline).await?;
+    let history = protocol::wire::history_from_parts(&parts)
+        .map_err(|e| Failure::Job(anyhow!("the history answer does not parse: {e}")))?;
     let mut view = View::new(json);
     view.history(&history);
     view.status(&status);

@@ -20,14 +20,17 @@ use std::{
 use protocol::{
     keys::{self, FleetKeys},
     wire::{
-        RunAdvert, TrialFailure, TrialOutcome, TrialRequest, WireMessage, WorkGrant, WorkRequest,
-        WorkerPresence,
+        show_fingerprint, RunAdvert, TrialFailure, TrialOutcome, TrialRequest, WireMessage,
+        WorkGrant, WorkRequest, WorkerPresence, WorkerStatus,
     },
     TrialModel,
 };
 use zenoh::Session;
 
 use crate::share::Share;
+
+/// How often a worker publishes its [`WorkerStatus`] for watchers.
+pub const STATUS_EVERY: Duration = Duration::from_secs(1);
 
 /// Settings of a worker.
 #[derive(Debug, Clone)]
@@ -127,6 +130,38 @@ async fn put_message<M: WireMessage>(session: &Session, key: &str, m: &M) {
         }
         Err(e) => tracing::error!(key, error = %e, "not published"),
     }
+}
+
+/// Publishes this worker's status for watchers (JSON); one that cannot be
+/// encoded or sent is logged.
+async fn put_status(session: &Session, key: &str, st: &WorkerStatus) {
+    match st.to_json() {
+        Ok(text) => {
+            let put = session
+                .put(key, text)
+                .encoding(zenoh::bytes::Encoding::APPLICATION_JSON);
+            if let Err(e) = put.await {
+                tracing::warn!(key, error = %e, "publishing the status failed");
+            }
+        }
+        Err(e) => tracing::error!(key, error = %e, "status not published"),
+    }
+}
+
+/// This machine's host name, as watchers see it.
+fn host_name() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .or_else(|_| std::fs::read_to_string("/etc/hostname"))
+        .map(|h| {
+            h.trim()
+                .chars()
+                .filter(|c| !c.is_control())
+                .take(253)
+                .collect::<String>()
+        })
+        .ok()
+        .filter(|h| !h.is_empty())
+        .unwrap_or_else(|| "unknown".into())
 }
 
 /// The text of a panic's payload.
@@ -284,6 +319,10 @@ pub async fn serve(
     let mut summary = WorkerSummary::default();
     let mut beat = tokio::time::interval(cfg.heartbeat);
     beat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let mut tell = tokio::time::interval(STATUS_EVERY);
+    tell.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let status_key = keys::worker_status(&prefix, &id);
+    let host = host_name();
     let version = env!("CARGO_PKG_VERSION").to_string();
     // When this worker last said anything to each run (a request, an
     // outcome): a heartbeat goes only to runs it holds trials of and has not
@@ -398,6 +437,24 @@ pub async fn serve(
                     spoke.insert(run.clone(), Instant::now());
                 }
                 spoke.retain(|r, _| held.keys().any(|(h, _, _)| h == r));
+            }
+            _ = tell.tick() => {
+                let mut runs: BTreeMap<String, u32> = BTreeMap::new();
+                for (r, _, _) in held.keys() {
+                    *runs.entry(r.clone()).or_default() += 1;
+                }
+                let st = WorkerStatus {
+                    worker: id.clone(),
+                    host: host.clone(),
+                    slots: cfg.slots,
+                    busy: u32::try_from(held.len()).unwrap_or(u32::MAX).min(cfg.slots),
+                    fingerprint: show_fingerprint(fingerprint),
+                    version: version.clone(),
+                    runs: runs.into_iter().collect(),
+                    trials: summary.trials,
+                    refused: summary.refused,
+                };
+                put_status(&session, &status_key, &st).await;
             }
             _ = shutdown.changed() => {
                 if *shutdown.borrow() {

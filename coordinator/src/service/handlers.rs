@@ -8,6 +8,7 @@ pub(super) fn on_failure(st: &mut State, f: &TrialFailure) -> Result<(), Service
     let t = (f.iteration, f.trial);
     match st.sched.answered(t, &f.worker, f.dispatch, Instant::now()) {
         Answer::Held if f.refused => {
+            st.count_failure(format!("given back: {}", f.reason));
             // Beyond its limits, or it is stopping: not the trial's failure.
             tracing::info!(worker = %f.worker, iteration = f.iteration, trial = f.trial, reason = %f.reason, "a worker gave a trial back");
             st.counters.redispatched += 1;
@@ -317,6 +318,21 @@ pub(super) async fn reply_json(q: &zenoh::query::Query, body: Result<String, Str
             }
         }
         Err(e) => tracing::error!(error = %e, "a query was not answered"),
+    }
+}
+
+/// Answers a history query in parts of [`protocol::wire::HISTORY_PART`]
+/// iterations, letting the link send each before the next: one reply of a
+/// long history outgrew the link's queue, and the push that waited for room
+/// held the very thread that makes room (the coordinator's one zenoh
+/// thread), until zenoh closed the link.
+pub(super) async fn reply_history(q: &zenoh::query::Query, history: &[IterationResult]) {
+    if history.is_empty() {
+        reply_json(q, Ok("[]".into())).await;
+    }
+    for part in history.chunks(protocol::wire::HISTORY_PART) {
+        reply_json(q, serde_json::to_string(part).map_err(|e| e.to_string())).await;
+        tokio::task::yield_now().await;
     }
 }
 

@@ -42,7 +42,7 @@ pub(super) fn e<E: std::fmt::Display>(err: E) -> anyhow::Error {
 
 /// Parameter `i` against the iteration, one point per decided iteration,
 /// ν′'s value as a line.
-pub(super) fn parameter_figure(
+pub(crate) fn parameter_figure(
     exp: &Experiment,
     decided: &[DecidedIteration],
     i: usize,
@@ -116,7 +116,7 @@ pub(super) fn pair_figure(
 
 /// Decisions per 50 iterations, stacked: REJECT (black) at the bottom, then
 /// EQUIVALENT (grey), then ACCEPT (white, dark edge).
-pub(super) fn decisions_figure(decided: &[DecidedIteration]) -> anyhow::Result<String> {
+pub(crate) fn decisions_figure(decided: &[DecidedIteration]) -> anyhow::Result<String> {
     let blocks = decided.chunks(50).collect::<Vec<_>>();
     let counts: Vec<[u32; 3]> = blocks
         .iter()
@@ -196,7 +196,7 @@ pub(super) fn metres_chart<'a, 'b>(
 
 /// mx of every iteration (points by decision; a fallen-only iteration at 0),
 /// s (green line, right scale ×5 m) and ν′'s mx (blue line).
-pub(super) fn progress_figure(decided: &[DecidedIteration]) -> anyhow::Result<String> {
+pub(crate) fn progress_figure(decided: &[DecidedIteration]) -> anyhow::Result<String> {
     let n = decided.last().map_or(1, |d| d.iteration + 1) as f64;
     let top = decided
         .iter()

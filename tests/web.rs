@@ -1,0 +1,486 @@
+//! `naofarm web` in a real browser: headless Chromium driven through
+//! ChromeDriver (the W3C WebDriver protocol), against a real fleet on
+//! 127.0.0.1 — a router, two coordinators, two workers — and two pages: a
+//! watcher's and a controller's. The screenshots the test takes are kept in
+//! `target/tmp/web-screenshots/`.
+#![allow(clippy::unwrap_used)]
+
+mod util;
+
+use std::{
+    path::{Path, PathBuf},
+    process::Stdio,
+    time::{Duration, Instant},
+};
+
+use serde_json::{json, Value};
+use util::{naofarm, scratch, Proc};
+
+const TIMEOUT: Duration = Duration::from_secs(90);
+
+/// A long synthetic run: it is still running when the test ends.
+fn experiment(dir: &Path, name: &str, seed: u64) -> PathBuf {
+    let text = format!(
+        "name = \"{name}\"\nseed = {seed}\niterations = 5000\ntrials_per_iteration = 4\n\
+         pipeline_depth = 2\nmodel = \"synthetic\"\nstart = \"expert\"\n\n\
+         [[parameter]]\nname = \"ThighRelHip2_Z\"\nlower = -0.08\nupper = -0.03\nexpert = -0.04\n\n\
+         [[parameter]]\nname = \"xlength_step_max\"\nlower = 0.02\nupper = 0.15\nexpert = 0.08\n\n\
+         [clop]\nn_mcmc = 100\n"
+    );
+    let file = dir.join(format!("{name}.toml"));
+    std::fs::write(&file, text).unwrap();
+    file
+}
+
+/// Waits until `p` wrote a line containing `needle` to stderr; that line.
+fn wait_line(p: &Proc, needle: &str) -> String {
+    let deadline = Instant::now() + TIMEOUT;
+    loop {
+        if let Some(l) = p.stderr().lines().find(|l| l.contains(needle)) {
+            return l.to_string();
+        }
+        assert!(Instant::now() < deadline, "never logged `{needle}`");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+fn router(dir: &Path, listen: &str) -> (Proc, String) {
+    let p = Proc::spawn(
+        naofarm()
+            .args(["router", "--listen", listen])
+            .stdout(Stdio::null()),
+        dir,
+        "router",
+    );
+    let line = wait_line(&p, "router listening on tcp/127.0.0.1:");
+    let endpoint = line.rsplit(' ').next().unwrap().trim().to_string();
+    (p, endpoint)
+}
+
+/// `naofarm web` on a port the OS picks; its process and address.
+fn web(dir: &Path, ep: &str, extra: &[&str]) -> (Proc, String) {
+    let p = Proc::spawn(
+        naofarm()
+            .args(["web", "--connect", ep, "--http", "127.0.0.1:0"])
+            .args(extra)
+            .stdout(Stdio::null()),
+        dir,
+        "web",
+    );
+    let line = wait_line(&p, "web page at http://");
+    let url = line
+        .rsplit(' ')
+        .next()
+        .unwrap()
+        .trim()
+        .trim_end_matches('/');
+    (p, url.to_string())
+}
+
+fn agent() -> ureq::Agent {
+    ureq::Agent::config_builder()
+        .http_status_as_error(false)
+        .timeout_global(Some(Duration::from_secs(60)))
+        .build()
+        .into()
+}
+
+/// An HTTP request: its status and body.
+fn http(method: &str, url: &str, headers: &[(&str, &str)], body: Option<&str>) -> (u16, String) {
+    let a = agent();
+    let mut r = match (method, body) {
+        ("GET", _) => {
+            let mut req = a.get(url);
+            for (k, v) in headers {
+                req = req.header(*k, *v);
+            }
+            req.call().unwrap()
+        }
+        (_, b) => {
+            let mut req = a.post(url);
+            for (k, v) in headers {
+                req = req.header(*k, *v);
+            }
+            req.send(b.unwrap_or("")).unwrap()
+        }
+    };
+    let status = r.status().as_u16();
+    (status, r.body_mut().read_to_string().unwrap())
+}
+
+/// Headless Chromium under ChromeDriver, one session.
+struct Browser {
+    _driver: Proc,
+    base: String,
+    session: String,
+}
+
+/// Debian's Chromium and ChromeDriver (`.ci/run` installs both), or
+/// `$NAOFARM_CHROMIUM` and `$NAOFARM_CHROMEDRIVER`.
+fn browser_paths() -> Option<(PathBuf, PathBuf)> {
+    let path = |var: &str, default: &str| {
+        std::env::var_os(var)
+            .map(PathBuf::from)
+            .unwrap_or_else(|| PathBuf::from(default))
+    };
+    let chromium = path("NAOFARM_CHROMIUM", "/usr/bin/chromium");
+    let driver = path("NAOFARM_CHROMEDRIVER", "/usr/bin/chromedriver");
+    (chromium.exists() && driver.exists()).then_some((chromium, driver))
+}
+
+impl Browser {
+    fn start(dir: &Path, chromium: &Path, driver: &Path) -> Self {
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port();
+        let proc = Proc::spawn(
+            std::process::Command::new(driver)
+                .arg(format!("--port={port}"))
+                .stdout(Stdio::null()),
+            dir,
+            "chromedriver",
+        );
+        let base = format!("http://127.0.0.1:{port}");
+        let deadline = Instant::now() + TIMEOUT;
+        while agent().get(format!("{base}/status")).call().is_err() {
+            assert!(Instant::now() < deadline, "ChromeDriver never answered");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        let caps = json!({"capabilities": {"alwaysMatch": {
+        "browserName": "chrome",
+        "goog:chromeOptions": {
+            "binary": chromium,
+            "args": ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                     "--no-first-run", "--disable-background-networking",
+                     "--disable-component-update", "--disable-sync",
+                     "--window-size=1400,1000",
+                     format!("--user-data-dir={}", dir.join("profile").display())],
+        }}}});
+        let (code, body) = http(
+            "POST",
+            &format!("{base}/session"),
+            &[],
+            Some(&caps.to_string()),
+        );
+        assert_eq!(code, 200, "a browser session: {body}");
+        let v: Value = serde_json::from_str(&body).unwrap();
+        let session = v["value"]["sessionId"].as_str().unwrap().to_string();
+        Self {
+            _driver: proc,
+            base,
+            session,
+        }
+    }
+
+    fn command(&self, method: &str, path: &str, body: &Value) -> Value {
+        let url = format!("{}/session/{}{path}", self.base, self.session);
+        let (code, text) = http(method, &url, &[], Some(&body.to_string()));
+        assert_eq!(code, 200, "{method} {path}: {text}");
+        serde_json::from_str::<Value>(&text).unwrap()["value"].take()
+    }
+
+    fn go(&self, url: &str) {
+        self.command("POST", "/url", &json!({ "url": url }));
+    }
+
+    fn eval(&self, script: &str) -> Value {
+        self.command(
+            "POST",
+            "/execute/sync",
+            &json!({"script": script, "args": []}),
+        )
+    }
+
+    /// Waits until `script` returns something truthy; that value.
+    fn wait(&self, what: &str, script: &str) -> Value {
+        let deadline = Instant::now() + TIMEOUT;
+        loop {
+            let v = self.eval(script);
+            let truthy = match &v {
+                Value::Null | Value::Bool(false) => false,
+                Value::Number(n) => n.as_f64() != Some(0.0),
+                Value::String(s) => !s.is_empty(),
+                _ => true,
+            };
+            if truthy {
+                return v;
+            }
+            assert!(Instant::now() < deadline, "the page never showed {what}");
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
+    /// A screenshot into `target/tmp/web-screenshots/NAME.png`; its pixels
+    /// must not all be one colour.
+    fn screenshot(&self, name: &str) {
+        use base64::Engine as _;
+        let v = self.command("GET", "/screenshot", &Value::Null);
+        let bytes = base64::engine::general_purpose::STANDARD
+            .decode(v.as_str().unwrap())
+            .unwrap();
+        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("web-screenshots");
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join(format!("{name}.png"));
+        std::fs::write(&file, &bytes).unwrap();
+        let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
+        let mut reader = decoder.read_info().unwrap();
+        let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+        let info = reader.next_frame(&mut buf).unwrap();
+        let n = info.color_type.samples();
+        let px = &buf[..info.buffer_size()];
+        let differing = px.chunks(n).filter(|p| p[..3] != px[..3]).count();
+        assert!(
+            differing > px.len() / n / 100,
+            "{} is blank",
+            file.display()
+        );
+        eprintln!("screenshot: {}", file.display());
+    }
+}
+
+impl Drop for Browser {
+    fn drop(&mut self) {
+        let url = format!("{}/session/{}", self.base, self.session);
+        let _ = agent().delete(url).call();
+    }
+}
+
+fn sigterm(p: &Proc) {
+    let ok = std::process::Command::new("kill")
+        .args(["-TERM", &p.child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(ok.success());
+}
+
+/// The fleet page lists both runs and both workers, a run's figure gains
+/// points as decisions arrive without a reload, a stopped worker leaves the
+/// list, the control is absent on a watcher's page and works on a
+/// controller's, and a page whose fleet goes away says so and recovers when
+/// it returns; bad URLs and bodies get 4xx.
+#[test]
+fn the_fleet_page_lives_in_a_real_browser() {
+    let Some((chromium, driver)) = browser_paths() else {
+        eprintln!(
+            "SKIPPED: no Chromium and ChromeDriver at /usr/bin (`.ci/run` installs Debian's \
+             `chromium` and `chromium-driver`; run it as root)"
+        );
+        return;
+    };
+    let dir = scratch("web");
+    let (mut router_proc, ep) = router(&dir, "tcp/127.0.0.1:0");
+    let _coordinators: Vec<Proc> = [("alpha", 1, 1), ("beta", 2, 3)]
+        .iter()
+        .map(|(name, seed, priority)| {
+            let exp = experiment(&dir, name, *seed);
+            Proc::spawn(
+                naofarm()
+                    .args([
+                        "coordinator",
+                        "--connect",
+                        &ep,
+                        "--priority",
+                        &priority.to_string(),
+                    ])
+                    .arg(&exp)
+                    .arg("--out")
+                    .arg(dir.join(name))
+                    .stdout(Stdio::null()),
+                &dir,
+                "coordinator",
+            )
+        })
+        .collect();
+    let w1 = Proc::spawn(
+        naofarm()
+            .args([
+                "worker",
+                "--connect",
+                &ep,
+                "--slots",
+                "2",
+                "--min-trial-ms",
+                "60",
+            ])
+            .stdout(Stdio::null()),
+        &dir,
+        "worker",
+    );
+    let w2 = Proc::spawn(
+        naofarm()
+            .args([
+                "worker",
+                "--connect",
+                &ep,
+                "--slots",
+                "2",
+                "--min-trial-ms",
+                "60",
+            ])
+            .stdout(Stdio::null()),
+        &dir,
+        "worker",
+    );
+    let (_watcher, page) = web(&dir, &ep, &[]);
+    let (_controller, control_page) = web(&dir, &ep, &["--control"]);
+    let b = Browser::start(&dir, &chromium, &driver);
+
+    // The fleet: both runs, both workers.
+    b.go(&format!("{page}/"));
+    b.wait(
+        "two runs and two workers",
+        "return document.querySelectorAll('#runs tr[data-run]').length == 2 \
+         && document.querySelectorAll('#workers tr[data-worker]').length == 2",
+    );
+    let names = b.eval(
+        "return [...document.querySelectorAll('#runs tr[data-run] a')].map(a => a.textContent)",
+    );
+    assert_eq!(names, json!(["alpha", "beta"]));
+    let workers = b.eval(
+        "return [...document.querySelectorAll('#workers tr[data-worker]')].map(r => r.dataset.worker)",
+    );
+    b.screenshot("fleet");
+    let fleet: Value =
+        serde_json::from_str(&http("GET", &format!("{page}/api/fleet"), &[], None).1).unwrap();
+    let id = |name: &str| {
+        fleet["runs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["run"] == name)
+            .unwrap()["id"]
+            .as_str()
+            .unwrap()
+            .to_string()
+    };
+    let (alpha, beta) = (id("alpha"), id("beta"));
+
+    // A run's figure grows without a reload; a watcher's page has no control.
+    b.go(&format!("{page}/run/{alpha}"));
+    let points = "const f = document.querySelector('[data-figure=\"param-ThighRelHip2_Z.svg\"]'); \
+                  return f && Number(f.dataset.points || 0)";
+    let before = b.wait("the parameter figure", points).as_u64().unwrap();
+    let loaded = b.eval("return window.naofarmLoaded");
+    b.wait(
+        "the figure gaining points",
+        &format!("{points} > {before} && Number(document.querySelector('[data-figure=\"param-ThighRelHip2_Z.svg\"]').dataset.points)"),
+    );
+    assert_eq!(
+        b.eval("return window.naofarmLoaded"),
+        loaded,
+        "the page reloaded"
+    );
+    assert_eq!(
+        b.eval("return document.querySelectorAll('#controls button').length"),
+        0
+    );
+    b.screenshot("run");
+
+    // A controller's page pauses and resumes a run.
+    b.go(&format!("{control_page}/run/{beta}"));
+    b.wait(
+        "the controls",
+        "return document.querySelectorAll('#controls button').length == 4",
+    );
+    b.eval("document.querySelector('#controls button[data-action=pause]').click()");
+    b.wait(
+        "the run paused",
+        "return document.getElementById('run-state').textContent == 'paused'",
+    );
+    b.eval("document.querySelector('#controls button[data-action=resume]').click()");
+    b.wait(
+        "the run running again",
+        "return document.getElementById('run-state').textContent == 'running'",
+    );
+
+    // A stopped worker leaves the list.
+    sigterm(&w2);
+    b.go(&format!("{page}/"));
+    let left = b.wait(
+        "one worker left",
+        "const r = [...document.querySelectorAll('#workers tr[data-worker]')]; \
+         return r.length == 1 && r[0].dataset.worker",
+    );
+    assert!(
+        workers.as_array().unwrap().contains(&left),
+        "{left} was not listed before"
+    );
+    drop(w1);
+
+    // The fleet goes away: the page says so; it comes back: the page recovers.
+    router_proc.kill();
+    b.wait(
+        "that the fleet is gone",
+        "return document.getElementById('gone') !== null",
+    );
+    let (_router_again, _) = router(&dir, &ep);
+    b.wait(
+        "the fleet back",
+        "return document.getElementById('gone') === null \
+         && document.querySelectorAll('#runs tr[data-run][data-state=running]').length == 2",
+    );
+    b.screenshot("fleet-recovered");
+
+    // Bad input: 404, 403, 400, 413, 409; never a panic.
+    let get = |url: String| http("GET", &url, &[], None).0;
+    assert_eq!(get(format!("{page}/run/no-such-run")), 404);
+    assert_eq!(get(format!("{page}/api/run/no-such-run")), 404);
+    assert_eq!(
+        get(format!("{page}/api/run/{alpha}/figure/param-nope.svg")),
+        404
+    );
+    assert_eq!(get(format!("{page}/nothing/here")), 404);
+    assert_eq!(get(format!("{page}/api/run/{alpha}/table")), 409);
+    let post = |base: &str, headers: &[(&str, &str)], body: &str| {
+        http(
+            "POST",
+            &format!("{base}/api/run/{alpha}/control"),
+            headers,
+            Some(body),
+        )
+    };
+    let page_headers = [
+        ("x-naofarm", "control"),
+        ("content-type", "application/json"),
+    ];
+    assert_eq!(post(&page, &page_headers, r#"{"action":"pause"}"#).0, 403);
+    assert_eq!(post(&control_page, &[], r#"{"action":"pause"}"#).0, 403);
+    assert_eq!(post(&control_page, &page_headers, "{not json").0, 400);
+    assert_eq!(
+        post(&control_page, &page_headers, r#"{"action":"explode"}"#).0,
+        400
+    );
+    assert_eq!(
+        post(
+            &control_page,
+            &page_headers,
+            r#"{"action":"priority","priority":0}"#
+        )
+        .0,
+        400
+    );
+    let big = format!(r#"{{"action":"pause","pad":"{}"}}"#, "x".repeat(10_000));
+    assert_eq!(post(&control_page, &page_headers, &big).0, 413);
+
+    // A page server started now rebuilds every run's history from the topics.
+    let (_fresh, fresh) = web(&dir, &ep, &[]);
+    let deadline = Instant::now() + TIMEOUT;
+    loop {
+        let (code, body) = http("GET", &format!("{fresh}/api/run/{alpha}"), &[], None);
+        if code == 200 {
+            let v: Value = serde_json::from_str(&body).unwrap();
+            if v["known"].as_u64() >= v["status"]["decided"].as_u64()
+                && v["known"].as_u64() > Some(0)
+            {
+                break;
+            }
+        }
+        assert!(
+            Instant::now() < deadline,
+            "a new page server never had alpha's history"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
