@@ -33,18 +33,6 @@ fn experiment(dir: &Path, file: &str, name: &str, seed: u64, iterations: u64) ->
     p
 }
 
-/// Waits until `p`'s stderr has a line with `needle`; returns that line.
-fn wait_line(p: &Proc, needle: &str) -> String {
-    let deadline = Instant::now() + TIMEOUT;
-    loop {
-        if let Some(l) = p.stderr().lines().find(|l| l.contains(needle)) {
-            return l.to_string();
-        }
-        assert!(Instant::now() < deadline, "never logged `{needle}`");
-        std::thread::sleep(Duration::from_millis(10));
-    }
-}
-
 /// A `naofarm router` on a port the OS picks (over mutual TLS with the
 /// certificates in `tls`); its endpoint, read from the router itself.
 fn router_with(dir: &Path, tls: Option<&Path>) -> (Proc, String) {
@@ -56,7 +44,7 @@ fn router_with(dir: &Path, tls: Option<&Path>) -> (Proc, String) {
         cmd.arg("--tls").arg(pki);
     }
     let p = Proc::spawn(&mut cmd, dir, "router");
-    let line = wait_line(&p, &format!("router listening on {scheme}/127.0.0.1:"));
+    let line = p.wait_line(&format!("router listening on {scheme}/127.0.0.1:"), TIMEOUT);
     let endpoint = line.rsplit(' ').next().unwrap().trim().to_string();
     (p, endpoint)
 }
@@ -685,9 +673,9 @@ fn a_run_takes_one_worker_fingerprint_and_a_resume_without_it_ends() {
     // A worker of this build pins the run's fingerprint; then one that
     // reports another joins, with more slots.
     let w = worker(&dir, &ep, 1, 150, &[]);
-    wait_line(&c, "fingerprint is pinned");
+    c.wait_line("fingerprint is pinned", TIMEOUT);
     let faulty = faulty_worker(&dir, &ep, 4, "NAOFARM_FAULT_FINGERPRINT", "1");
-    wait_line(&faulty, "will not serve the run");
+    faulty.wait_line("will not serve the run", TIMEOUT);
     // A worker of an older build asks again after each refusal: each is
     // answered, and none brings an advert (which would bring the next ask).
     let id = listed(&ep, 1)[0]["id"].as_str().unwrap().to_string();
@@ -817,7 +805,7 @@ fn run_over_tls_lets_each_role_do_only_its_part() {
         &dir,
         "run",
     );
-    let line = wait_line(&run, "zenoh on tls/127.0.0.1:");
+    let line = run.wait_line("zenoh on tls/127.0.0.1:", TIMEOUT);
     let ep = line
         .split_whitespace()
         .find(|w| w.starts_with("tls/127.0.0.1:"))
@@ -1170,7 +1158,7 @@ fn a_worker_gives_back_at_once_the_trials_it_cannot_read() {
     let out = dir.join("run");
     let mut c = coordinator_with(&dir, &exp, &out, &ep, &["--lease-s", "600"]);
     let faulty = faulty_worker(&dir, &ep, 4, "NAOFARM_FAULT_GRANT", "unknown-param");
-    let why = wait_line(&faulty, "will not serve the run");
+    let why = faulty.wait_line("will not serve the run", TIMEOUT);
     assert!(why.contains("no_such_parameter"), "{why}");
     assert!(faulty
         .stderr()
@@ -1198,9 +1186,9 @@ fn a_worker_says_what_it_waits_for_and_a_mistyped_endpoint_or_config_is_refused(
         .port();
     let ep = format!("tcp/127.0.0.1:{port}");
     let w = worker(&dir, &ep, 1, 0, &[]);
-    wait_line(
-        &w,
+    w.wait_line(
         &format!("worker: waiting for {ep}: nothing answers there yet"),
+        TIMEOUT,
     );
     assert!(!w.stderr().contains("connected to"), "{}", w.stderr());
     let _router = Proc::spawn(
@@ -1210,7 +1198,7 @@ fn a_worker_says_what_it_waits_for_and_a_mistyped_endpoint_or_config_is_refused(
         &dir,
         "router",
     );
-    wait_line(&w, &format!("worker: connected to {ep}"));
+    w.wait_line(&format!("worker: connected to {ep}"), TIMEOUT);
 
     for (bad, why) in [
         ("garbage", "not a zenoh endpoint"),

@@ -18,10 +18,10 @@ use util::{naofarm, scratch, Proc};
 
 const TIMEOUT: Duration = Duration::from_secs(90);
 
-/// A long synthetic run: it is still running when the test ends.
-fn experiment(dir: &Path, name: &str, seed: u64) -> PathBuf {
+/// A synthetic run of `iterations`.
+fn experiment(dir: &Path, name: &str, seed: u64, iterations: u64) -> PathBuf {
     let text = format!(
-        "name = \"{name}\"\nseed = {seed}\niterations = 5000\ntrials_per_iteration = 4\n\
+        "name = \"{name}\"\nseed = {seed}\niterations = {iterations}\ntrials_per_iteration = 4\n\
          pipeline_depth = 2\nmodel = \"synthetic\"\nstart = \"expert\"\n\n\
          [[parameter]]\nname = \"ThighRelHip2_Z\"\nlower = -0.08\nupper = -0.03\nexpert = -0.04\n\n\
          [[parameter]]\nname = \"xlength_step_max\"\nlower = 0.02\nupper = 0.15\nexpert = 0.08\n\n\
@@ -32,18 +32,6 @@ fn experiment(dir: &Path, name: &str, seed: u64) -> PathBuf {
     file
 }
 
-/// Waits until `p` wrote a line containing `needle` to stderr; that line.
-fn wait_line(p: &Proc, needle: &str) -> String {
-    let deadline = Instant::now() + TIMEOUT;
-    loop {
-        if let Some(l) = p.stderr().lines().find(|l| l.contains(needle)) {
-            return l.to_string();
-        }
-        assert!(Instant::now() < deadline, "never logged `{needle}`");
-        std::thread::sleep(Duration::from_millis(10));
-    }
-}
-
 fn router(dir: &Path, listen: &str) -> (Proc, String) {
     let p = Proc::spawn(
         naofarm()
@@ -52,7 +40,7 @@ fn router(dir: &Path, listen: &str) -> (Proc, String) {
         dir,
         "router",
     );
-    let line = wait_line(&p, "router listening on tcp/127.0.0.1:");
+    let line = p.wait_line("router listening on tcp/127.0.0.1:", TIMEOUT);
     let endpoint = line.rsplit(' ').next().unwrap().trim().to_string();
     (p, endpoint)
 }
@@ -67,7 +55,7 @@ fn web(dir: &Path, ep: &str, extra: &[&str]) -> (Proc, String) {
         dir,
         "web",
     );
-    let line = wait_line(&p, "web page at http://");
+    let line = p.wait_line("web page at http://", TIMEOUT);
     let url = line
         .rsplit(' ')
         .next()
@@ -255,7 +243,8 @@ fn sigterm(p: &Proc) {
     assert!(ok.success());
 }
 
-/// The fleet page lists both runs and both workers, a run's figure gains
+/// The fleet page lists every run and both workers, a run that is over
+/// shows its Table IV, a running run's figure gains
 /// points as decisions arrive without a reload, a stopped worker leaves the
 /// list, the control is absent on a watcher's page and works on a
 /// controller's, and a page whose fleet goes away says so and recovers when
@@ -271,73 +260,62 @@ fn the_fleet_page_lives_in_a_real_browser() {
     };
     let dir = scratch("web");
     let (mut router_proc, ep) = router(&dir, "tcp/127.0.0.1:0");
-    let _coordinators: Vec<Proc> = [("alpha", 1, 1), ("beta", 2, 3)]
-        .iter()
-        .map(|(name, seed, priority)| {
-            let exp = experiment(&dir, name, *seed);
-            Proc::spawn(
-                naofarm()
-                    .args([
-                        "coordinator",
-                        "--connect",
-                        &ep,
-                        "--priority",
-                        &priority.to_string(),
-                    ])
-                    .arg(&exp)
-                    .arg("--out")
-                    .arg(dir.join(name))
-                    .stdout(Stdio::null()),
-                &dir,
-                "coordinator",
-            )
-        })
-        .collect();
-    let w1 = Proc::spawn(
-        naofarm()
-            .args([
-                "worker",
-                "--connect",
-                &ep,
-                "--slots",
-                "2",
-                "--min-trial-ms",
-                "60",
-            ])
-            .stdout(Stdio::null()),
-        &dir,
-        "worker",
-    );
-    let w2 = Proc::spawn(
-        naofarm()
-            .args([
-                "worker",
-                "--connect",
-                &ep,
-                "--slots",
-                "2",
-                "--min-trial-ms",
-                "60",
-            ])
-            .stdout(Stdio::null()),
-        &dir,
-        "worker",
-    );
+    let coordinator = |name: &str, seed: u64, priority: u32, iterations: u64| {
+        Proc::spawn(
+            naofarm()
+                .args([
+                    "coordinator",
+                    "--connect",
+                    &ep,
+                    "--priority",
+                    &priority.to_string(),
+                ])
+                .arg(experiment(&dir, name, seed, iterations))
+                .arg("--out")
+                .arg(dir.join(name))
+                .stdout(Stdio::null()),
+            &dir,
+            "coordinator",
+        )
+    };
+    // Two runs that go on while the test runs.
+    let _alpha = coordinator("alpha", 1, 1, 5000);
+    let _beta = coordinator("beta", 2, 3, 5000);
+    let worker = || {
+        Proc::spawn(
+            naofarm()
+                .args([
+                    "worker",
+                    "--connect",
+                    &ep,
+                    "--slots",
+                    "2",
+                    "--min-trial-ms",
+                    "60",
+                ])
+                .stdout(Stdio::null()),
+            &dir,
+            "worker",
+        )
+    };
+    let (w1, w2) = (worker(), worker());
     let (_watcher, page) = web(&dir, &ep, &[]);
     let (_controller, control_page) = web(&dir, &ep, &["--control"]);
+    // And one that is soon over, started once the pages watch.
+    let _gamma = coordinator("gamma", 3, 6, 30);
     let b = Browser::start(&dir, &chromium, &driver);
 
     // The fleet: both runs, both workers.
     b.go(&format!("{page}/"));
     b.wait(
-        "two runs and two workers",
-        "return document.querySelectorAll('#runs tr[data-run]').length == 2 \
+        "three runs and two workers",
+        "return document.querySelectorAll('#runs tr[data-run]').length == 3 \
          && document.querySelectorAll('#workers tr[data-worker]').length == 2",
     );
     let names = b.eval(
         "return [...document.querySelectorAll('#runs tr[data-run] a')].map(a => a.textContent)",
     );
-    assert_eq!(names, json!(["alpha", "beta"]));
+    assert_eq!(names, json!(["alpha", "beta", "gamma"]));
     let workers = b.eval(
         "return [...document.querySelectorAll('#workers tr[data-worker]')].map(r => r.dataset.worker)",
     );
@@ -355,7 +333,19 @@ fn the_fleet_page_lives_in_a_real_browser() {
             .unwrap()
             .to_string()
     };
-    let (alpha, beta) = (id("alpha"), id("beta"));
+    let (alpha, beta, gamma) = (id("alpha"), id("beta"), id("gamma"));
+
+    // A run that is over: its page shows its Table IV.
+    b.go(&format!("{page}/run/{gamma}"));
+    b.wait(
+        "gamma's Table IV",
+        "return document.getElementById('table4') !== null",
+    );
+    let table = b.eval("return document.getElementById('table4').textContent");
+    for column in ["Expert", "Optim.1", "Optim.2"] {
+        assert!(table.as_str().unwrap().contains(column), "{table}");
+    }
+    b.screenshot("finished-run");
 
     // A run's figure grows without a reload; a watcher's page has no control.
     b.go(&format!("{page}/run/{alpha}"));
@@ -419,7 +409,8 @@ fn the_fleet_page_lives_in_a_real_browser() {
     b.wait(
         "the fleet back",
         "return document.getElementById('gone') === null \
-         && document.querySelectorAll('#runs tr[data-run][data-state=running]').length == 2",
+         && document.querySelectorAll('#runs tr[data-run][data-state=running]').length == 2 \
+         && document.querySelectorAll('#runs tr[data-run][data-state=finished]').length == 1",
     );
     b.screenshot("fleet-recovered");
 

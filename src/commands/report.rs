@@ -164,10 +164,16 @@ fn one(
             .map_err(|e| Failure::Job(anyhow!("{}: {e}", out.join(&png).display())))
     };
     let job = |e: anyhow::Error| Failure::Job(e);
+    let rows = table_iv(dir, &exp, trials, threads)?;
+    let optim2 = rows
+        .iter()
+        .find(|r| r.name == coordinator::evolve::TABLE_SETS[2])
+        .map(|r| r.params.clone());
     let mut figures = Vec::new();
     for (i, p) in exp.parameter.iter().enumerate() {
         let name = format!("param-{}.svg", p.name);
-        figure(&name, &parameter_figure(&exp, decided, i).map_err(job)?)?;
+        let o2 = optim2.as_ref().and_then(|o| o.get(i).copied());
+        figure(&name, &parameter_figure(&exp, decided, i, o2).map_err(job)?)?;
         figures.push((name, format!("{} against the iteration", p.name)));
     }
     for i in 0..exp.parameter.len() {
@@ -186,7 +192,6 @@ fn one(
         "s and mx of every iteration, ν′'s mx".into(),
     ));
 
-    let rows = table_iv(dir, &exp, trials, threads)?;
     let mut replays = Vec::new();
     if exp.model == TrialModel::Nao {
         for r in &rows {

@@ -60,9 +60,6 @@ const STYLE: &str = include_str!("web/page.css");
 const TABLE_TRIALS: u32 = 100;
 /// The most often the feed sends the fleet (it sends only when it changed).
 const FEED_EVERY: Duration = Duration::from_millis(250);
-/// How often the page's server asks every run for its status (new runs, a
-/// fleet that came back) and checks that it reaches the fleet.
-const ASK_EVERY: Duration = Duration::from_secs(2);
 /// Largest request body (a control request is a few bytes).
 const MAX_BODY: usize = 4096;
 
@@ -300,7 +297,7 @@ async fn figure(
     State(sh): State<Arc<Shared>>,
     Path((id, name)): Path<(String, String)>,
 ) -> Response {
-    let (exp, decided) = {
+    let (exp, decided, optim2) = {
         let f = sh.fleet();
         let Some(e) = f.runs.get(&id) else {
             return not_found(&format!("no run `{id}`"));
@@ -309,7 +306,7 @@ async fn figure(
             return not_found(&format!("run `{id}`'s experiment has not arrived yet"));
         };
         let decided = decided_of(&exp, &e.history);
-        (exp, decided)
+        (exp, decided, e.status.optim2.clone())
     };
     let drawn = match name.as_str() {
         "progress.svg" => figures::progress_figure(&decided),
@@ -319,7 +316,11 @@ async fn figure(
             .and_then(|n| n.strip_suffix(".svg"))
             .and_then(|n| exp.parameter.iter().position(|p| p.name == n))
         {
-            Some(i) => figures::parameter_figure(&exp, &decided, i),
+            Some(i) => {
+                let name = &exp.parameter[i].name;
+                let o2 = optim2.iter().find(|(n, _)| n == name).map(|(_, v)| *v);
+                figures::parameter_figure(&exp, &decided, i, o2)
+            }
             None => return not_found(&format!("run `{id}` has no figure `{name}`")),
         },
     };
@@ -533,7 +534,7 @@ async fn control(
                 match RunStatus::from_json(&t) {
                     Ok(s) => {
                         let v = serde_json::json!(s);
-                        sh.fleet().status(s);
+                        sh.fleet().status(s, Instant::now());
                         sh.bump();
                         json(&v)
                     }
@@ -612,7 +613,6 @@ async fn follow(session: Session, sh: Arc<Shared>) -> Result<(), Failure> {
         .await
         .map_err(z)?;
     let mut tick = tokio::time::interval(Duration::from_secs(1));
-    let mut ticks: u64 = 0;
     loop {
         tokio::select! {
             s = statuses.recv_async() => {
@@ -659,16 +659,18 @@ async fn follow(session: Session, sh: Arc<Shared>) -> Result<(), Failure> {
             }
             s = coordinators.recv_async() => {
                 let Ok(s) = s else { break };
-                let id = keys::last_chunk(s.key_expr().as_str());
+                let id = keys::last_chunk(s.key_expr().as_str()).to_string();
                 if s.kind() == SampleKind::Delete {
-                    sh.fleet().coordinator_gone(id);
+                    sh.fleet().coordinator_gone(&id);
                 } else {
-                    sh.fleet().coordinator_back(id);
+                    // A run started, or the fleet came back: its status.
+                    sh.fleet().coordinator_back(&id);
+                    let key = format!("{}/*/{id}/status", sh.prefix);
+                    tokio::spawn(ask_statuses(session.clone(), sh.clone(), key));
                 }
                 sh.bump();
             }
             _ = tick.tick() => {
-                ticks += 1;
                 let info = session.info();
                 let reached = info.routers_zid().await.next().is_some() || info.peers_zid().await.next().is_some();
                 let expired = sh.fleet().expire(Instant::now());
@@ -681,8 +683,8 @@ async fn follow(session: Session, sh: Arc<Shared>) -> Result<(), Failure> {
                 if expired || moved {
                     sh.bump();
                 }
-                if reached && (ticks % ASK_EVERY.as_secs() == 1 || moved) {
-                    tokio::spawn(ask_statuses(session.clone(), sh.clone()));
+                if reached && moved {
+                    tokio::spawn(ask_statuses(session.clone(), sh.clone(), keys::status_all(&sh.prefix)));
                 }
             }
         }
@@ -693,7 +695,7 @@ async fn follow(session: Session, sh: Arc<Shared>) -> Result<(), Failure> {
 /// A status came: kept, and the run's history asked for if the page lacks some.
 fn took_status(session: &Session, sh: &Arc<Shared>, st: RunStatus) {
     let (id, name) = (st.id.clone(), st.run.clone());
-    let ask = sh.fleet().status(st);
+    let ask = sh.fleet().status(st, Instant::now());
     sh.bump();
     if ask == Ask::History
         && sh
@@ -740,9 +742,10 @@ async fn ask_one(session: &Session, key: &str) -> Option<String> {
     None
 }
 
-async fn ask_statuses(session: Session, sh: Arc<Shared>) {
+/// Asks `key` for run statuses and takes each answer.
+async fn ask_statuses(session: Session, sh: Arc<Shared>, key: String) {
     let Ok(replies) = session
-        .get(keys::status_all(&sh.prefix))
+        .get(key)
         .consolidation(ConsolidationMode::None)
         .timeout(Duration::from_secs(3))
         .await

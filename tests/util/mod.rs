@@ -168,6 +168,25 @@ impl Drop for Proc {
     }
 }
 
+impl Proc {
+    /// Waits until it wrote a line containing `needle` to stderr, for at
+    /// most `within`; that line.
+    pub fn wait_line(&self, needle: &str, within: std::time::Duration) -> String {
+        let deadline = std::time::Instant::now() + within;
+        loop {
+            if let Some(l) = self.stderr().lines().find(|l| l.contains(needle)) {
+                return l.to_string();
+            }
+            assert!(
+                std::time::Instant::now() < deadline,
+                "{} never logged `{needle}`",
+                self.name
+            );
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+    }
+}
+
 /// The JSON lines of `run --json` / `coordinator --json` / `watch --json`:
 /// the decided iterations' results (history first), the last status, and
 /// the final `finished` line.

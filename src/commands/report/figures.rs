@@ -41,17 +41,23 @@ pub(super) fn e<E: std::fmt::Display>(err: E) -> anyhow::Error {
 }
 
 /// Parameter `i` against the iteration, one point per decided iteration,
-/// ν′'s value as a line.
+/// ν′'s value as a line (blue) and, when known, CLOP's mean Optim.2 (red).
 pub(crate) fn parameter_figure(
     exp: &Experiment,
     decided: &[DecidedIteration],
     i: usize,
+    optim2: Option<f64>,
 ) -> anyhow::Result<String> {
     let p = &exp.parameter[i];
     let n = decided.last().map_or(1, |d| d.iteration + 1) as f64;
+    let caption = if optim2.is_some() {
+        format!("{} (blue: ν′, red: Optim.2)", p.name)
+    } else {
+        format!("{} (blue: ν′)", p.name)
+    };
     svg(|root| {
         let mut chart = ChartBuilder::on(root)
-            .caption(&p.name, ("sans-serif", 18))
+            .caption(caption, ("sans-serif", 18))
             .margin(10)
             .x_label_area_size(35)
             .y_label_area_size(60)
@@ -70,6 +76,11 @@ pub(crate) fn parameter_figure(
         chart
             .draw_series(LineSeries::new(best, BLUE.stroke_width(2)))
             .map_err(e)?;
+        if let Some(v) = optim2 {
+            chart
+                .draw_series(LineSeries::new([(0.0, v), (n, v)], RED.stroke_width(1)))
+                .map_err(e)?;
+        }
         chart
             .draw_series(
                 decided

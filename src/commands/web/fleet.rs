@@ -30,10 +30,17 @@ pub struct RunEntry {
     /// Its coordinator's liveliness token went (the run ended or its
     /// coordinator stopped); the last status stays shown.
     pub gone: bool,
+    /// Since when the status has counted decisions the page lacks.
+    gap_since: Option<Instant>,
 }
 
+/// How long a gap in a run's history may last before its history is asked
+/// for again: a decision's result and the status after it travel apart, so
+/// a status may come first; a result that was lost leaves a gap that stays.
+pub const GAP_PATIENCE: Duration = Duration::from_secs(2);
+
 impl RunEntry {
-    /// Iterations decided that the page has not got (asked for again).
+    /// Iterations decided that the page has not got.
     #[must_use]
     pub fn missing(&self) -> bool {
         (self.history.len() as u64) < self.status.decided
@@ -69,18 +76,27 @@ pub enum Ask {
 }
 
 impl Fleet {
-    /// A run's status (published or answered).
-    pub fn status(&mut self, s: RunStatus) -> Ask {
+    /// A run's status (published or answered) at `now`: whether to ask for
+    /// its history (and experiment) — a new run, or a gap in its history
+    /// older than [`GAP_PATIENCE`].
+    pub fn status(&mut self, s: RunStatus, now: Instant) -> Ask {
         let id = s.id.clone();
         let entry = self.runs.entry(id).or_insert_with(|| RunEntry {
             status: s.clone(),
             history: BTreeMap::new(),
             experiment: None,
             gone: false,
+            gap_since: None,
         });
         entry.status = s;
         entry.gone = false;
-        if entry.missing() || entry.experiment.is_none() {
+        if !entry.missing() {
+            entry.gap_since = None;
+        }
+        let stale = entry.missing()
+            && now.saturating_duration_since(*entry.gap_since.get_or_insert(now)) >= GAP_PATIENCE;
+        if entry.experiment.is_none() || stale {
+            entry.gap_since = None;
             Ask::History
         } else {
             Ask::Nothing
@@ -294,6 +310,12 @@ mod tests {
         }
     }
 
+    fn experiment() -> Experiment {
+        let text = "name = \"run-a\"\nseed = 1\niterations = 10\nmodel = \"synthetic\"\n\n\
+                    [[parameter]]\nname = \"ThighRelHip2_Z\"\nlower = -0.08\nupper = -0.03\nexpert = -0.04\n";
+        Experiment::from_toml(text).unwrap()
+    }
+
     fn result(run: &str, i: u64) -> IterationResult {
         IterationResult {
             run: run.into(),
@@ -321,11 +343,11 @@ mod tests {
     fn a_runs_share_is_its_trials_in_flight_against_its_prioritys() {
         let mut f = Fleet::default();
         let now = Instant::now();
-        f.status(status("a", 3, 0));
-        f.status(status("b", 1, 0));
+        f.status(status("a", 3, 0), now);
+        f.status(status("b", 1, 0), now);
         let mut paused = status("c", 4, 0);
         paused.state = RunState::Paused;
-        f.status(paused);
+        f.status(paused, now);
         f.worker(worker("w1", 8, &[("a", 6), ("b", 2)]), now);
         let v = f.snapshot(now);
         assert_eq!(v["utilisation"], 1.0);
@@ -352,20 +374,36 @@ mod tests {
         assert!(f.workers.is_empty());
     }
 
-    /// A status that decided more than the page holds asks for the history;
+    /// A new run's history is asked for at once; a gap, once it has lasted
+    /// [`GAP_PATIENCE`] (a status may come before its decision's result);
     /// results of another run's name are not taken.
     #[test]
-    fn a_gap_in_the_history_asks_for_it_again() {
+    fn a_gap_in_the_history_that_stays_asks_for_it_again() {
         let mut f = Fleet::default();
-        assert_eq!(f.status(status("a", 1, 2)), Ask::History);
+        let t0 = Instant::now();
+        assert_eq!(f.status(status("a", 1, 2), t0), Ask::History);
         assert!(f.result("a", result("run-a", 0)));
         assert!(!f.result("a", result("run-a", 0)));
         assert!(!f.result("a", result("other", 1)));
         assert!(!f.result("nobody", result("run-a", 1)));
-        f.history("a", vec![result("run-a", 0), result("run-a", 1)], None);
+        f.history(
+            "a",
+            vec![result("run-a", 0), result("run-a", 1)],
+            Some(experiment()),
+        );
         assert!(!f.runs["a"].missing());
-        // Still no experiment: asked again.
-        assert_eq!(f.status(status("a", 1, 2)), Ask::History);
+        assert_eq!(f.status(status("a", 1, 2), t0), Ask::Nothing);
+        // Iteration 2's status before its result: no question yet.
+        assert_eq!(f.status(status("a", 1, 3), t0), Ask::Nothing);
+        assert!(f.result("a", result("run-a", 2)));
+        assert_eq!(f.status(status("a", 1, 3), t0 + GAP_PATIENCE), Ask::Nothing);
+        // Iteration 3's result is lost: asked once the gap has lasted.
+        assert_eq!(f.status(status("a", 1, 4), t0), Ask::Nothing);
+        assert_eq!(
+            f.status(status("a", 1, 4), t0 + GAP_PATIENCE / 2),
+            Ask::Nothing
+        );
+        assert_eq!(f.status(status("a", 1, 4), t0 + GAP_PATIENCE), Ask::History);
         f.connected = true;
         f.coordinator_gone("a");
         assert_eq!(f.snapshot(Instant::now())["runs"][0]["state"], "gone");
