@@ -72,7 +72,10 @@ pub fn run(
             .map(|d| format!(" --tls {}", d.display()))
             .unwrap_or_default();
         let name = &run.evolve().experiment().name;
-        eprintln!("zenoh on {endpoint}; watch from another terminal with `naofarm watch {name} --connect {endpoint}{tls_flag}`");
+        eprintln!(
+            "zenoh on {endpoint}; watch from another terminal with `naofarm watch {name} --connect \
+             {endpoint}{tls_flag}`, or in a browser with `naofarm web --connect {endpoint}{tls_flag}`"
+        );
         let worker_net = NetArgs {
             connect: vec![endpoint],
             listen: vec![],
