@@ -33,14 +33,21 @@ fn experiment(dir: &Path, name: &str, seed: u64, iterations: u64) -> PathBuf {
 }
 
 fn router(dir: &Path, listen: &str) -> (Proc, String) {
+    router_with(dir, listen, &[])
+}
+
+/// A router on `listen` with `extra` flags (`--tls DIR`); its endpoint.
+fn router_with(dir: &Path, listen: &str, extra: &[&str]) -> (Proc, String) {
     let p = Proc::spawn(
         naofarm()
             .args(["router", "--listen", listen])
+            .args(extra)
             .stdout(Stdio::null()),
         dir,
         "router",
     );
-    let line = p.wait_line("router listening on tcp/127.0.0.1:", TIMEOUT);
+    let scheme = listen.split('/').next().unwrap_or("tcp");
+    let line = p.wait_line(&format!("router listening on {scheme}/127.0.0.1:"), TIMEOUT);
     let endpoint = line.rsplit(' ').next().unwrap().trim().to_string();
     (p, endpoint)
 }
@@ -474,4 +481,73 @@ fn the_fleet_page_lives_in_a_real_browser() {
         );
         std::thread::sleep(Duration::from_millis(100));
     }
+}
+
+/// Over mutual TLS with roles, a page started with the watcher's
+/// certificate sees every run (its history and experiment) and every
+/// worker; one started with `--control` acts with the coordinator's.
+#[test]
+fn over_tls_a_watchers_page_sees_the_fleet_and_a_controllers_acts() {
+    let dir = scratch("web-tls");
+    let pki = dir.join("pki");
+    util::succeed(naofarm().arg("certs").arg(&pki));
+    let pki = pki.to_str().unwrap();
+    let (_router, ep) = router_with(&dir, "tls/127.0.0.1:0", &["--tls", pki]);
+    let _coordinator = Proc::spawn(
+        naofarm()
+            .args(["coordinator", "--connect", &ep, "--tls", pki])
+            .arg(experiment(&dir, "delta", 4, 5000))
+            .arg("--out")
+            .arg(dir.join("delta"))
+            .stdout(Stdio::null()),
+        &dir,
+        "coordinator",
+    );
+    let _worker = Proc::spawn(
+        naofarm()
+            .args(["worker", "--connect", &ep, "--tls", pki, "--slots", "2"])
+            .args(["--min-trial-ms", "60"])
+            .stdout(Stdio::null()),
+        &dir,
+        "worker",
+    );
+    let (_watcher, page) = web(&dir, &ep, &["--tls", pki]);
+    let (_controller, control_page) = web(&dir, &ep, &["--tls", pki, "--control"]);
+    let deadline = Instant::now() + TIMEOUT;
+    let id = loop {
+        let fleet: Value =
+            serde_json::from_str(&http("GET", &format!("{page}/api/fleet"), &[], None).1).unwrap();
+        if let (Some(id), 1) = (
+            fleet["runs"][0]["id"].as_str(),
+            fleet["workers"].as_array().map_or(0, Vec::len),
+        ) {
+            let (code, body) = http("GET", &format!("{page}/api/run/{id}"), &[], None);
+            let run: Value = serde_json::from_str(&body).unwrap_or_default();
+            if code == 200
+                && run["known"].as_u64() > Some(0)
+                && run["figures"].as_array().is_some_and(|f| !f.is_empty())
+            {
+                assert_eq!(run["control"], false);
+                break id.to_string();
+            }
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the watcher's page never saw the run whole"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let headers = [
+        ("x-naofarm", "control"),
+        ("content-type", "application/json"),
+    ];
+    let (code, body) = http(
+        "POST",
+        &format!("{control_page}/api/run/{id}/control"),
+        &headers,
+        Some(r#"{"action":"pause"}"#),
+    );
+    assert_eq!(code, 200, "{body}");
+    let status: Value = serde_json::from_str(&body).unwrap();
+    assert_eq!(status["state"], "paused");
 }
