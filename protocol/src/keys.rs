@@ -96,6 +96,18 @@ impl RunKeys {
     }
 }
 
+/// `<prefix>/*/<id>/status`: the status of run `id`, whatever its name.
+#[must_use]
+pub fn status_of(prefix: &str, id: &str) -> String {
+    format!("{prefix}/*/{id}/status")
+}
+
+/// The worker id of a key made by [`worker_status`].
+#[must_use]
+pub fn worker_of_status(key: &str) -> &str {
+    last_chunk(key.strip_suffix("/status").unwrap_or(key))
+}
+
 /// `<prefix>/*/*/results/*`: every result of every run.
 #[must_use]
 pub fn results_all(prefix: &str) -> String {
@@ -232,6 +244,8 @@ mod tests {
             worker_status("naofarm", "abc"),
             "naofarm/@workers/abc/status"
         );
+        assert_eq!(worker_of_status(&worker_status("naofarm", "abc")), "abc");
+        assert_eq!(status_of("naofarm", "u-1"), "naofarm/*/u-1/status");
         assert_eq!(k.experiment(), "naofarm/r1/u-1/experiment");
         assert_eq!(results_all("naofarm"), "naofarm/*/*/results/*");
     }

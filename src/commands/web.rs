@@ -640,7 +640,7 @@ async fn follow(session: Session, sh: Arc<Shared>) -> Result<(), Failure> {
                 let Ok(s) = s else { break };
                 match WorkerStatus::from_json(&payload(&s)) {
                     Ok(w) => {
-                        let live = keys::last_chunk(s.key_expr().as_str().trim_end_matches("/status")) == w.worker;
+                        let live = keys::worker_of_status(s.key_expr().as_str()) == w.worker;
                         if live {
                             sh.fleet().worker(w, Instant::now());
                             sh.bump();
@@ -665,7 +665,7 @@ async fn follow(session: Session, sh: Arc<Shared>) -> Result<(), Failure> {
                 } else {
                     // A run started, or the fleet came back: its status.
                     sh.fleet().coordinator_back(&id);
-                    let key = format!("{}/*/{id}/status", sh.prefix);
+                    let key = keys::status_of(&sh.prefix, &id);
                     tokio::spawn(ask_statuses(session.clone(), sh.clone(), key));
                 }
                 sh.bump();
