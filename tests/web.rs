@@ -75,7 +75,7 @@ fn web(dir: &Path, ep: &str, extra: &[&str]) -> (Proc, String) {
 fn agent() -> ureq::Agent {
     ureq::Agent::config_builder()
         .http_status_as_error(false)
-        .timeout_global(Some(Duration::from_secs(60)))
+        .timeout_global(Some(TIMEOUT + Duration::from_secs(30)))
         .build()
         .into()
 }
@@ -101,6 +101,26 @@ fn http(method: &str, url: &str, headers: &[(&str, &str)], body: Option<&str>) -
     };
     let status = r.status().as_u16();
     (status, r.body_mut().read_to_string().unwrap())
+}
+
+/// Waits until `check` holds, asking it at once and again at each event of
+/// the page server's feed at `page` (sent whenever the fleet changes).
+fn on_feed(page: &str, what: &str, mut check: impl FnMut() -> bool) {
+    use std::io::BufRead;
+    if check() {
+        return;
+    }
+    let deadline = Instant::now() + TIMEOUT;
+    let mut r = agent().get(format!("{page}/events")).call().unwrap();
+    let feed = std::io::BufReader::new(r.body_mut().as_reader());
+    for line in feed.lines() {
+        let line = line.unwrap_or_else(|e| panic!("the feed ended before {what}: {e}"));
+        if line.starts_with("data:") && check() {
+            return;
+        }
+        assert!(Instant::now() < deadline, "never {what}");
+    }
+    panic!("the feed ended before {what}");
 }
 
 /// Headless Chromium under ChromeDriver, one session.
@@ -130,19 +150,18 @@ impl Browser {
             .local_addr()
             .unwrap()
             .port();
+        // ChromeDriver says on stdout when it listens: sent to the log file.
         let proc = Proc::spawn(
-            std::process::Command::new(driver)
+            std::process::Command::new("sh")
+                .args(["-c", "exec \"$0\" \"$1\" 1>&2"])
+                .arg(driver)
                 .arg(format!("--port={port}"))
                 .stdout(Stdio::null()),
             dir,
             "chromedriver",
         );
+        proc.wait_line("was started successfully", TIMEOUT);
         let base = format!("http://127.0.0.1:{port}");
-        let deadline = Instant::now() + TIMEOUT;
-        while agent().get(format!("{base}/status")).call().is_err() {
-            assert!(Instant::now() < deadline, "ChromeDriver never answered");
-            std::thread::sleep(Duration::from_millis(50));
-        }
         let caps = json!({"capabilities": {"alwaysMatch": {
         "browserName": "chrome",
         "goog:chromeOptions": {
@@ -162,6 +181,9 @@ impl Browser {
         assert_eq!(code, 200, "a browser session: {body}");
         let v: Value = serde_json::from_str(&body).unwrap();
         let session = v["value"]["sessionId"].as_str().unwrap().to_string();
+        let url = format!("{base}/session/{session}/timeouts");
+        let script_ms = json!({ "script": TIMEOUT.as_millis() }).to_string();
+        assert_eq!(http("POST", &url, &[], Some(&script_ms)).0, 200);
         Self {
             _driver: proc,
             base,
@@ -188,23 +210,26 @@ impl Browser {
         )
     }
 
-    /// Waits until `script` returns something truthy; that value.
+    /// Waits until `script` returns something truthy; that value. The
+    /// page checks it at once and again on every change of its document
+    /// (the feed redraws it), so the test waits on the page's events.
     fn wait(&self, what: &str, script: &str) -> Value {
-        let deadline = Instant::now() + TIMEOUT;
-        loop {
-            let v = self.eval(script);
-            let truthy = match &v {
-                Value::Null | Value::Bool(false) => false,
-                Value::Number(n) => n.as_f64() != Some(0.0),
-                Value::String(s) => !s.is_empty(),
-                _ => true,
-            };
-            if truthy {
-                return v;
-            }
-            assert!(Instant::now() < deadline, "the page never showed {what}");
-            std::thread::sleep(Duration::from_millis(100));
-        }
+        let observer = format!(
+            "const done = arguments[arguments.length - 1];
+             const check = () => {{ try {{ return (function () {{ {script} }})(); }} catch (e) {{ return null; }} }};
+             const first = check();
+             if (first) {{ done(first); return; }}
+             const seen = new MutationObserver(() => {{
+               const v = check();
+               if (v) {{ seen.disconnect(); done(v); }}
+             }});
+             seen.observe(document, {{subtree: true, childList: true, attributes: true, characterData: true}});"
+        );
+        let url = format!("{}/session/{}/execute/async", self.base, self.session);
+        let body = json!({"script": observer, "args": []}).to_string();
+        let (code, text) = http("POST", &url, &[], Some(&body));
+        assert_eq!(code, 200, "the page never showed {what}: {text}");
+        serde_json::from_str::<Value>(&text).unwrap()["value"].take()
     }
 
     /// A screenshot into `target/tmp/web-screenshots/NAME.png`; its pixels
@@ -464,23 +489,13 @@ fn the_fleet_page_lives_in_a_real_browser() {
 
     // A page server started now rebuilds every run's history from the topics.
     let (_fresh, fresh) = web(&dir, &ep, &[]);
-    let deadline = Instant::now() + TIMEOUT;
-    loop {
+    on_feed(&fresh, "had alpha's history", || {
         let (code, body) = http("GET", &format!("{fresh}/api/run/{alpha}"), &[], None);
-        if code == 200 {
-            let v: Value = serde_json::from_str(&body).unwrap();
-            if v["known"].as_u64() >= v["status"]["decided"].as_u64()
-                && v["known"].as_u64() > Some(0)
-            {
-                break;
-            }
-        }
-        assert!(
-            Instant::now() < deadline,
-            "a new page server never had alpha's history"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
+        let v: Value = serde_json::from_str(&body).unwrap_or_default();
+        code == 200
+            && v["known"].as_u64() > Some(0)
+            && v["known"].as_u64() >= v["status"]["decided"].as_u64()
+    });
 }
 
 /// Over mutual TLS with roles, a page started with the watcher's
@@ -513,30 +528,24 @@ fn over_tls_a_watchers_page_sees_the_fleet_and_a_controllers_acts() {
     );
     let (_watcher, page) = web(&dir, &ep, &["--tls", pki]);
     let (_controller, control_page) = web(&dir, &ep, &["--tls", pki, "--control"]);
-    let deadline = Instant::now() + TIMEOUT;
-    let id = loop {
+    let mut id = String::new();
+    on_feed(&page, "saw the run whole on the watcher's page", || {
         let fleet: Value =
             serde_json::from_str(&http("GET", &format!("{page}/api/fleet"), &[], None).1).unwrap();
-        if let (Some(id), 1) = (
+        let (Some(run), 1) = (
             fleet["runs"][0]["id"].as_str(),
             fleet["workers"].as_array().map_or(0, Vec::len),
-        ) {
-            let (code, body) = http("GET", &format!("{page}/api/run/{id}"), &[], None);
-            let run: Value = serde_json::from_str(&body).unwrap_or_default();
-            if code == 200
-                && run["known"].as_u64() > Some(0)
-                && run["figures"].as_array().is_some_and(|f| !f.is_empty())
-            {
-                assert_eq!(run["control"], false);
-                break id.to_string();
-            }
-        }
-        assert!(
-            Instant::now() < deadline,
-            "the watcher's page never saw the run whole"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    };
+        ) else {
+            return false;
+        };
+        let (code, body) = http("GET", &format!("{page}/api/run/{run}"), &[], None);
+        let v: Value = serde_json::from_str(&body).unwrap_or_default();
+        id = run.to_string();
+        code == 200
+            && v["known"].as_u64() > Some(0)
+            && v["figures"].as_array().is_some_and(|f| !f.is_empty())
+            && v["control"] == false
+    });
     let headers = [
         ("x-naofarm", "control"),
         ("content-type", "application/json"),
