@@ -726,37 +726,11 @@ async fn ask_all(session: &Session, key: &str) -> Vec<String> {
     out
 }
 
-/// The first answer to `key`, if any comes within 3 s.
-async fn ask_one(session: &Session, key: &str) -> Option<String> {
-    let replies = session
-        .get(key)
-        .consolidation(ConsolidationMode::None)
-        .timeout(Duration::from_secs(3))
-        .await
-        .ok()?;
-    while let Ok(reply) = replies.recv_async().await {
-        if let Ok(sample) = reply.result() {
-            return Some(payload(sample));
-        }
-    }
-    None
-}
-
 /// Asks `key` for run statuses and takes each answer.
 async fn ask_statuses(session: Session, sh: Arc<Shared>, key: String) {
-    let Ok(replies) = session
-        .get(key)
-        .consolidation(ConsolidationMode::None)
-        .timeout(Duration::from_secs(3))
-        .await
-    else {
-        return;
-    };
-    while let Ok(reply) = replies.recv_async().await {
-        if let Ok(sample) = reply.result() {
-            if let Ok(st) = RunStatus::from_json(&payload(sample)) {
-                took_status(&session, &sh, st);
-            }
+    for text in ask_all(&session, &key).await {
+        if let Ok(st) = RunStatus::from_json(&text) {
+            took_status(&session, &sh, st);
         }
     }
 }
@@ -768,10 +742,11 @@ async fn ask_history(session: Session, sh: Arc<Shared>, name: String, id: String
             tracing::warn!(run = %id, error = %e, "ignored a history answer");
             Vec::new()
         });
-    let exp = ask_one(&session, &rkeys.experiment())
+    let exp = ask_all(&session, &rkeys.experiment())
         .await
-        .and_then(|t| serde_json::from_str::<Experiment>(&t).ok())
-        .filter(|x| x.validate().is_ok());
+        .iter()
+        .filter_map(|t| serde_json::from_str::<Experiment>(t).ok())
+        .find(|x| x.validate().is_ok());
     sh.fleet().history(&id, history, exp);
     sh.asking
         .lock()
