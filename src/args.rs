@@ -35,6 +35,8 @@ pub enum Command {
         /// CA, and the roles are enforced (`--listen` must be tls/127.0.0.1:PORT).
         #[arg(long, value_name = "DIR")]
         tls: Option<PathBuf>,
+        #[command(flatten)]
+        programs: ProgramArgs,
     },
     /// The coordinator alone (cluster use): owns the run, its journal and dispatch.
     Coordinator {
@@ -62,6 +64,8 @@ pub enum Command {
         heartbeat_ms: u64,
         #[command(flatten)]
         limits: WorkerLimits,
+        #[command(flatten)]
+        programs: ProgramArgs,
     },
     /// A zenoh router inside naofarm (cluster use): runs, workers and watchers meet on it.
     Router {
@@ -168,6 +172,9 @@ pub enum Command {
         /// Threads for Table IV's trials (default: cores).
         #[arg(long)]
         threads: Option<usize>,
+        /// A program run's Table IV runs its program, as a worker does.
+        #[command(flatten)]
+        programs: ProgramArgs,
     },
     /// Verify a run's journal (`check`) or copy its valid records into a new run (`salvage`).
     #[command(subcommand)]
@@ -392,6 +399,21 @@ pub struct WorkerLimits {
     /// Trial models served, comma-separated (nao, synthetic).
     #[arg(long, default_value = "nao,synthetic", value_delimiter = ',')]
     pub models: Vec<String>,
+}
+
+/// The trial programs a worker (or `run`'s local workers, or `report`'s
+/// Table IV) may run: simulators of the owner's choosing, by name.
+#[derive(Args, Debug, Default, Clone)]
+pub struct ProgramArgs {
+    /// Serve trials of the program at PATH under NAME (repeatable): an
+    /// experiment with `model = "program"` and `program = "NAME"` runs it,
+    /// once per trial (docs/programs.md). Nothing else is ever run.
+    #[arg(long = "program", value_name = "NAME=PATH")]
+    pub programs: Vec<String>,
+    /// Longest wall time of one program trial, s; past it the program and
+    /// every process it started are killed and the trial fails.
+    #[arg(long, default_value_t = 600.0)]
+    pub program_timeout_s: f64,
 }
 
 /// Arguments of `stand`.

@@ -229,3 +229,20 @@ fn only_read<T>(
 pub fn set_key(name: &str) -> String {
     name.to_lowercase().replace('.', "")
 }
+
+/// Registers `--program NAME=PATH` (each checked, hashed and asked its
+/// `--version`) with `--program-timeout-s`; a bad one is a usage error.
+pub async fn register_programs(
+    args: &crate::args::ProgramArgs,
+) -> Result<worker::program::Programs, Failure> {
+    let t = args.program_timeout_s;
+    usage_unless(t.is_finite() && t > 0.0 && t <= 86_400.0, || {
+        format!(
+            "--program-timeout-s {}: must be in (0, 86400] seconds",
+            protocol::params::Shown(t)
+        )
+    })?;
+    worker::program::Programs::register(&args.programs, std::time::Duration::from_secs_f64(t))
+        .await
+        .map_err(|e| Failure::Usage(e.into()))
+}

@@ -92,7 +92,8 @@ fn dispatch(cli: Cli) -> Result<(), Failure> {
             json,
             listen,
             tls,
-        } => commands::run::run(&job, workers, json, listen.as_deref(), tls),
+            programs,
+        } => commands::run::run(&job, workers, json, listen.as_deref(), tls, &programs),
         Command::Coordinator { job, net, json } => {
             commands::coordinator::coordinator(&job, &net, json)
         }
@@ -102,7 +103,8 @@ fn dispatch(cli: Cli) -> Result<(), Failure> {
             min_trial_ms,
             heartbeat_ms,
             limits,
-        } => commands::worker::worker(&net, slots, min_trial_ms, heartbeat_ms, &limits),
+            programs,
+        } => commands::worker::worker(&net, slots, min_trial_ms, heartbeat_ms, &limits, &programs),
         Command::Router {
             listen,
             config,
@@ -132,9 +134,11 @@ fn dispatch(cli: Cli) -> Result<(), Failure> {
             out,
             trials,
             threads,
+            programs,
         } => commands::report::report(
             &dirs,
             out.as_deref(),
+            &programs,
             trials,
             threads.unwrap_or_else(|| {
                 std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)

@@ -604,6 +604,79 @@ fn a_worker_that_joins_mid_run_gets_work() {
     );
 }
 
+/// A worker process serving the programs `NAME=PATH` (under tests/programs).
+fn program_worker(port: u16, programs: &[(&str, &str)]) -> Proc {
+    let mut cmd = naofarm();
+    cmd.args(["worker", "--connect", &format!("tcp/127.0.0.1:{port}")])
+        .args(["--slots", "2"])
+        .env("RUST_LOG", "warn,naofarm_worker::service=debug")
+        .stdout(Stdio::null());
+    for (name, file) in programs {
+        let path = root().join("tests/programs").join(file);
+        cmd.args(["--program", &format!("{name}={}", path.display())]);
+    }
+    Proc::spawn_logged(&mut cmd, "worker")
+}
+
+#[test]
+fn a_program_run_goes_only_to_workers_that_registered_its_program() {
+    let dir = scratch("program-farm");
+    let text = std::fs::read_to_string(root().join("experiments/test/program.toml")).unwrap();
+    let exp = dir.join("exp.toml");
+    std::fs::write(&exp, text).unwrap();
+    let out = dir.join("run");
+    let mut c = Coordinator::start(&exp, &out, 30.0);
+    // One worker serves only another program; one serves the run's.
+    let other = program_worker(c.port, &[("other", "toy")]);
+    let other_id = worker_id(&other);
+    let mut ws = vec![other, program_worker(c.port, &[("toy", "toy")])];
+    let status = c.wait_exit();
+    assert!(status.success(), "{:?}", c.seen);
+    let log = plain(&ws[0].stderr());
+    kill_all(&mut ws);
+    assert!(
+        log.contains("this worker has not registered a program named `toy`")
+            && !log.contains("trial started"),
+        "the worker without the run's program never asked for its trials: {log}"
+    );
+    let records = journal(&out);
+    let workers: std::collections::BTreeSet<String> =
+        records.iter().filter_map(outcome_worker).collect();
+    assert_eq!(workers.len(), 1, "{workers:?}");
+    assert!(!workers.contains(&other_id));
+    assert_eq!(
+        records
+            .iter()
+            .filter(|r| matches!(r, Record::Outcome { .. }))
+            .count(),
+        6 * 6,
+        "every trial of the 6 iterations journaled"
+    );
+}
+
+#[test]
+fn a_failing_program_s_trials_fail_with_its_reason_and_end_the_run() {
+    let dir = scratch("program-crash");
+    let text = std::fs::read_to_string(root().join("experiments/test/program.toml")).unwrap();
+    let exp = dir.join("exp.toml");
+    std::fs::write(&exp, text).unwrap();
+    let out = dir.join("run");
+    let mut c = Coordinator::start(&exp, &out, 30.0);
+    // Registered as `toy`, but it crashes on every trial.
+    let mut ws = vec![program_worker(c.port, &[("toy", "crash")])];
+    let status = c.wait_exit();
+    kill_all(&mut ws);
+    assert!(
+        !status.success(),
+        "a run whose every trial fails does not succeed"
+    );
+    let text = plain(&std::fs::read_to_string(&c.stderr).unwrap());
+    assert!(
+        text.contains("program `toy` exited with status 3; standard error: crash: the simulator lost its licence server | crash: giving up"),
+        "{text}"
+    );
+}
+
 fn outcome_worker(r: &Record) -> Option<String> {
     if let Record::Outcome { worker, .. } = r {
         Some(worker.clone())

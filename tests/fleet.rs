@@ -688,6 +688,7 @@ fn a_run_takes_one_worker_fingerprint_and_a_resume_without_it_ends() {
         max_duration_s: 100.0,
         version: "0.0.1".into(),
         fingerprint: other,
+        program: None,
     }
     .encode()
     .unwrap();

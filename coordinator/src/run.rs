@@ -801,6 +801,7 @@ pub fn request(
         trial: k,
         seed,
         model: exp.model,
+        program: exp.program.clone(),
         robot_type: exp.robot_type,
         duration_s: exp.trial_duration_s,
         params: exp.full_params(&opened.params),

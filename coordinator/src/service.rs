@@ -299,6 +299,7 @@ impl State {
             running: u32::try_from(running).unwrap_or(u32::MAX),
             state: self.state(),
             duration_s: self.facts.experiment.trial_duration_s,
+            program: self.facts.experiment.program.clone(),
             seq: self.advert.0,
         }
     }

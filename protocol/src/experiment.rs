@@ -89,6 +89,10 @@ pub enum TrialModel {
     Nao,
     /// A cheap deterministic noisy stand-in with the same parameter names.
     Synthetic,
+    /// A trial program that workers' owners registered by name (the
+    /// experiment's `program`): a simulator of its own, run once per trial
+    /// with the trial as JSON (docs/programs.md).
+    Program,
 }
 
 impl TrialModel {
@@ -97,8 +101,9 @@ impl TrialModel {
         match s {
             "nao" => Ok(Self::Nao),
             "synthetic" => Ok(Self::Synthetic),
+            "program" => Ok(Self::Program),
             other => Err(format!(
-                "unknown trial model `{other}` (expected `nao` or `synthetic`)"
+                "unknown trial model `{other}` (expected `nao`, `synthetic` or `program`)"
             )),
         }
     }
@@ -264,6 +269,10 @@ pub struct Experiment {
     /// Trial model (default `nao`).
     #[serde(default)]
     pub model: TrialModel,
+    /// The trial program's name, with `model = "program"`: a name workers'
+    /// owners register (`naofarm worker --program NAME=PATH`), never a path.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub program: Option<String>,
     /// League robot type 0–4 (default 0).
     #[serde(default)]
     pub robot_type: u8,
@@ -286,6 +295,26 @@ pub struct Experiment {
     pub physics: Physics,
 }
 
+/// Checks a trial program's name: one word of letters, digits, `-` and `_`,
+/// at most 64 bytes (a name, never a path or a command).
+pub fn check_program_name(name: &str) -> Result<(), String> {
+    if name.is_empty() || name.len() > 64 {
+        return Err(format!(
+            "a program's name must be 1 to 64 bytes, not {}",
+            name.len()
+        ));
+    }
+    match name
+        .chars()
+        .find(|c| !(c.is_ascii_alphanumeric() || matches!(c, '-' | '_')))
+    {
+        Some(c) => Err(format!(
+            "program name `{name}` contains `{c}`; a program is named (letters, digits, `-`, `_`), never given as a path or a command"
+        )),
+        None => Ok(()),
+    }
+}
+
 fn default_trials() -> u32 {
     10
 }
@@ -297,6 +326,21 @@ fn default_depth() -> u32 {
 }
 
 impl Experiment {
+    /// Whether `name` is in the parameter registry; the error lists the known ones.
+    fn known(name: &str) -> Result<(), String> {
+        match params::find(name) {
+            Some(_) => Ok(()),
+            None => Err(format!(
+                "unknown parameter `{name}` (known: {})",
+                params::KNOWN
+                    .iter()
+                    .map(|k| k.name)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )),
+        }
+    }
+
     /// Parses and validates the text of an experiment file.
     pub fn from_toml(text: &str) -> Result<Self, ExperimentError> {
         let e: Experiment = toml::from_str(text)
@@ -327,30 +371,54 @@ impl Experiment {
         if self.robot_type > 4 {
             return Err(invalid("robot_type", "must be 0, 1, 2, 3 or 4"));
         }
+        let program = self.model == TrialModel::Program;
+        match &self.program {
+            None if program => {
+                return Err(invalid(
+                    "program",
+                    "model = \"program\" needs the program's name (`program = \"NAME\"`)",
+                ))
+            }
+            Some(_) if !program => {
+                return Err(invalid(
+                    "program",
+                    format!(
+                        "only model = \"program\" runs a program; this model is `{}`",
+                        format!("{:?}", self.model).to_lowercase()
+                    ),
+                ))
+            }
+            Some(name) => check_program_name(name).map_err(|m| invalid("program", m))?,
+            None => {}
+        }
         if self.parameter.is_empty() {
             return Err(invalid("parameter", "at least one [[parameter]] is needed"));
         }
+        // A program's parameters are its own: any word, bounds as given.
+        let check_value = |name: &str, v: f64| {
+            if program {
+                params::check_program_value(name, v)
+            } else {
+                params::check_value(name, v)
+            }
+        };
         for (i, p) in self.parameter.iter().enumerate() {
             let f = |s: &str| format!("parameter[{i}].{s}");
-            params::find(&p.name).ok_or_else(|| {
-                invalid(
-                    f("name"),
-                    format!(
-                        "unknown parameter `{}` (known: {})",
-                        p.name,
-                        params::KNOWN
-                            .iter()
-                            .map(|k| k.name)
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ),
-                )
-            })?;
+            if program {
+                if p.expert.is_none() {
+                    return Err(invalid(
+                        f("expert"),
+                        "a program's parameter needs its expert value (there is no registry default)",
+                    ));
+                }
+            } else {
+                Self::known(&p.name).map_err(|m| invalid(f("name"), m))?;
+            }
             if self.parameter[..i].iter().any(|q| q.name == p.name) {
                 return Err(invalid(f("name"), format!("`{}` is listed twice", p.name)));
             }
             for (field, v) in [("lower", p.lower), ("upper", p.upper)] {
-                params::check_value(&p.name, v).map_err(|m| invalid(f(field), m))?;
+                check_value(&p.name, v).map_err(|m| invalid(f(field), m))?;
             }
             if p.lower >= p.upper {
                 return Err(invalid(
@@ -393,7 +461,7 @@ impl Experiment {
         }
         for (name, v) in &self.fixed {
             let field = format!("fixed.{name}");
-            params::check_value(name, *v).map_err(|m| invalid(&field, m))?;
+            check_value(name, *v).map_err(|m| invalid(&field, m))?;
             if self.parameter.iter().any(|p| &p.name == name) {
                 return Err(invalid(field, "is also an optimised [[parameter]]"));
             }

@@ -18,7 +18,34 @@ pub struct Measurement {
     pub sim_time_s: f64,
 }
 
+/// The most a trial's torso can travel, m.
+pub const PLAUSIBLE_DISTANCE_M: f64 = 100.0;
+
 impl Measurement {
+    /// Whether this could be a real trial of `duration_s` (the coordinator's
+    /// check of every outcome, and a worker's of every program's answer).
+    pub fn plausible(&self, duration_s: f64) -> Result<(), String> {
+        if self.x_m.abs() > PLAUSIBLE_DISTANCE_M || self.y_m.abs() > PLAUSIBLE_DISTANCE_M {
+            return Err(format!(
+                "x {} m, y {} m (beyond {PLAUSIBLE_DISTANCE_M} m)",
+                self.x_m, self.y_m
+            ));
+        }
+        if !(0.0..=duration_s + 1e-6).contains(&self.sim_time_s) {
+            return Err(format!(
+                "simulated time {} s outside [0, {duration_s}] s",
+                self.sim_time_s
+            ));
+        }
+        if self
+            .fall_time_s
+            .is_some_and(|t| t > self.sim_time_s + 1e-9 || t < 0.0)
+        {
+            return Err("fall time after the simulated time".into());
+        }
+        Ok(())
+    }
+
     /// Checks every number is finite and the fall is consistent.
     pub fn check(&self) -> Result<(), String> {
         for (name, v) in [

@@ -283,6 +283,30 @@ pub fn check(p: Param, value: f64) -> Result<(), ParamError> {
     Ok(())
 }
 
+/// Checks a parameter of a trial program (`model = "program"`): the program
+/// owns its names and ranges, so the name only has to be one word of
+/// letters, digits and `_` (at most 64 bytes) and the value finite.
+pub fn check_program_value(name: &str, value: f64) -> Result<(), String> {
+    if name.is_empty() || name.len() > 64 {
+        return Err(format!(
+            "a program's parameter name must be 1 to 64 bytes, not {}",
+            name.len()
+        ));
+    }
+    if let Some(c) = name
+        .chars()
+        .find(|c| !(c.is_ascii_alphanumeric() || *c == '_'))
+    {
+        return Err(format!(
+            "parameter name `{name}` contains `{c}`; use letters, digits and `_`"
+        ));
+    }
+    if !value.is_finite() {
+        return Err(format!("`{name}` = {value} is not a finite number"));
+    }
+    Ok(())
+}
+
 /// Checks one value against the admissible range of its parameter.
 ///
 /// Returns a message naming the parameter and its range on failure.

@@ -18,7 +18,7 @@ use crate::{
 /// carry (the parameter registry's names and a trial request's physics):
 /// a decoder of another version refuses the message by its envelope, so
 /// workers of two builds never serve one run with different walks.
-pub const WIRE_VERSION: u8 = 22;
+pub const WIRE_VERSION: u8 = 23;
 /// Largest message accepted, in bytes (checked before any allocation).
 pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
 const MAGIC: [u8; 2] = *b"NF";
@@ -221,6 +221,16 @@ fn chunk(field: &'static str, s: &str) -> Check {
     crate::keys::check_chunk(field, s).map_err(|m| (field, m))
 }
 
+fn program_param_list(field: &'static str, ps: &[(String, f64)]) -> Check {
+    if ps.len() > 64 {
+        return Err((field, format!("{} parameters, at most 64", ps.len())));
+    }
+    for (name, v) in ps {
+        crate::params::check_program_value(name, *v).map_err(|m| (field, m))?;
+    }
+    Ok(())
+}
+
 fn param_list(field: &'static str, ps: &[(String, f64)]) -> Check {
     if ps.len() > 64 {
         return Err((field, format!("{} parameters, at most 64", ps.len())));
@@ -244,6 +254,8 @@ pub struct TrialRequest {
     pub seed: u64,
     /// Which trial model to run.
     pub model: TrialModel,
+    /// The trial program's name, exactly when `model` is a program.
+    pub program: Option<String>,
     /// League robot type 0–4.
     pub robot_type: u8,
     /// Simulated duration, s.
@@ -261,6 +273,16 @@ impl WireMessage for TrialRequest {
     const KIND: u8 = 1;
     fn validate(&self) -> Check {
         chunk("run", &self.run)?;
+        match (&self.program, self.model) {
+            (Some(p), TrialModel::Program) => {
+                crate::experiment::check_program_name(p).map_err(|m| ("program", m))?
+            }
+            (None, TrialModel::Program) => {
+                return Err(("program", "a program trial without a program name".into()))
+            }
+            (Some(_), _) => return Err(("program", "a program name on a model trial".into())),
+            (None, _) => {}
+        }
         if self.robot_type > 4 {
             return Err(("robot_type", format!("{} is not 0..=4", self.robot_type)));
         }
@@ -272,7 +294,11 @@ impl WireMessage for TrialRequest {
             ));
         }
         self.physics.validate()?;
-        param_list("params", &self.params)
+        if self.model == TrialModel::Program {
+            program_param_list("params", &self.params)
+        } else {
+            param_list("params", &self.params)
+        }
     }
 }
 
@@ -538,6 +564,9 @@ pub struct RunAdvert {
     pub state: RunState,
     /// Longest trial of the run, simulated seconds (a worker beyond its limit does not ask).
     pub duration_s: f64,
+    /// The trial program the run's trials need, if any: only workers that
+    /// registered it ask.
+    pub program: Option<String>,
     /// Increases with every advert of this coordinator (older ones are ignored).
     pub seq: u64,
 }
@@ -548,6 +577,9 @@ impl WireMessage for RunAdvert {
     fn validate(&self) -> Check {
         chunk("id", &self.id)?;
         chunk("name", &self.name)?;
+        if let Some(p) = &self.program {
+            crate::experiment::check_program_name(p).map_err(|m| ("program", m))?;
+        }
         Control::Priority(self.priority)
             .check()
             .map_err(|m| ("priority", m))?;
@@ -576,8 +608,12 @@ pub struct WorkRequest {
     pub max_duration_s: f64,
     /// naofarm version of the worker.
     pub version: String,
-    /// The worker's fingerprint: a run grants trials only to workers of its own.
+    /// The worker's fingerprint: a run grants trials only to workers of its
+    /// own. For a program's run it also hashes the program's identity.
     pub fingerprint: u64,
+    /// The trial program this worker registered under the run's program's
+    /// name, if the run names one: a run grants its trials to no other.
+    pub program: Option<String>,
 }
 
 impl WireMessage for WorkRequest {
@@ -600,6 +636,9 @@ impl WireMessage for WorkRequest {
         finite("max_duration_s", self.max_duration_s)?;
         if self.version.len() > 64 {
             return Err(("version", "longer than 64 bytes".into()));
+        }
+        if let Some(p) = &self.program {
+            crate::experiment::check_program_name(p).map_err(|m| ("program", m))?;
         }
         Ok(())
     }
@@ -969,7 +1008,7 @@ mod tests {
                                      d in 0.1f64..100.0, ps in params(), t in 0u8..5, disp in any::<u64>(),
                                      sub in 1u32..=50, its in 1u32..=16, pgs in 1u32..=200) {
             let physics = Physics { substeps: sub, solver_iterations: its, pgs_iterations: pgs };
-            let m = TrialRequest { run, iteration: i, trial: k, seed, model: TrialModel::Synthetic,
+            let m = TrialRequest { run, iteration: i, trial: k, seed, model: TrialModel::Synthetic, program: None,
                                    robot_type: t, duration_s: d, params: ps, dispatch: disp, physics };
             prop_assert_eq!(TrialRequest::decode(&m.encode().unwrap()), Ok(m));
         }
@@ -1016,9 +1055,9 @@ mod tests {
 
         #[test]
         fn fleet_messages_round_trip(w in run(), slots in 1u32..64, p in 1u32..1000, ready in any::<u32>(), seq in any::<u64>()) {
-            let ad = RunAdvert { id: format!("{w}-id"), name: w.clone(), priority: p, ready, running: ready, state: RunState::Paused, duration_s: 10.0, seq };
+            let ad = RunAdvert { id: format!("{w}-id"), name: w.clone(), priority: p, ready, running: ready, state: RunState::Paused, duration_s: 10.0, program: None, seq };
             prop_assert_eq!(RunAdvert::decode(&ad.encode().unwrap()), Ok(ad));
-            let rq = WorkRequest { worker: w.clone(), want: slots, slots, busy: 0, max_duration_s: 60.0, version: "x".into(), fingerprint: seq };
+            let rq = WorkRequest { worker: w.clone(), want: slots, slots, busy: 0, max_duration_s: 60.0, version: "x".into(), fingerprint: seq, program: None };
             prop_assert_eq!(WorkRequest::decode(&rq.encode().unwrap()), Ok(rq));
             let c = ControlRequest { action: Control::Priority(p), by: w };
             prop_assert_eq!(ControlRequest::decode(&c.encode().unwrap()), Ok(c));
@@ -1050,6 +1089,7 @@ mod tests {
             max_duration_s: 60.0,
             version: "x".into(),
             fingerprint: 1,
+            program: None,
         };
         assert!(matches!(
             WorkRequest::decode(&rq.encode().unwrap()),
@@ -1074,6 +1114,7 @@ mod tests {
             running: 0,
             state: RunState::Running,
             duration_s: 1.0,
+            program: None,
             seq: 1,
         };
         assert!(ad.encode().is_ok_and(|b| RunAdvert::decode(&b).is_err()));
@@ -1148,6 +1189,7 @@ mod tests {
             trial: 0,
             seed: 0,
             model: TrialModel::Nao,
+            program: None,
             robot_type: 0,
             duration_s: 10.0,
             params: vec![("ThighRelHip2_Z".into(), 0.5)],

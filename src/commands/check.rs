@@ -16,11 +16,14 @@ pub fn check(path: &Path, json: bool) -> Result<(), Failure> {
         outln!("{text}");
         return Ok(());
     }
+    let model = match &e.program {
+        Some(p) => format!("the program `{p}`"),
+        None => format!("model {:?}", e.model),
+    };
     outln!(
-        "experiment `{}` (seed {}, model {:?}, robot type {}, start {:?})",
+        "experiment `{}` (seed {}, {model}, robot type {}, start {:?})",
         e.name,
         e.seed,
-        e.model,
         e.robot_type,
         e.start
     );

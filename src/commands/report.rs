@@ -14,6 +14,7 @@ use protocol::{
     params::ParamValues, pickout::stats, Decision, Experiment, Stats, TrialModel, TrialRequest,
 };
 use worker::nao::{footwork::Footwork, sim::SimSettings, trial};
+use worker::program::Programs;
 
 use crate::common::{note_tail, usage_unless, Failure};
 use crate::render;
@@ -54,6 +55,7 @@ struct Found {
 pub fn report(
     dirs: &[PathBuf],
     out: Option<&Path>,
+    programs: &crate::args::ProgramArgs,
     trials: u32,
     threads: usize,
 ) -> Result<(), Failure> {
@@ -61,9 +63,14 @@ pub fn report(
     usage_unless(many, || {
         format!("--trials {trials}: 1 to 100000 per Table IV row")
     })?;
+    let programs = &tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| Failure::Job(e.into()))?
+        .block_on(crate::common::register_programs(programs))?;
     match (dirs, out) {
         ([], _) => Err(Failure::Usage(anyhow!("give at least one run directory"))),
-        ([dir], out) => one(dir, read(dir)?, out, trials, threads).map(|_| ()),
+        ([dir], out) => one(dir, read(dir)?, out, programs, trials, threads).map(|_| ()),
         (_, None) => Err(Failure::Usage(anyhow!(
             "a report over {} runs needs --out DIR",
             dirs.len()
@@ -74,7 +81,7 @@ pub fn report(
             for (k, dir) in dirs.iter().enumerate() {
                 let view = read(dir)?;
                 let sub = out.join(format!("{k}-{}", view.experiment.name));
-                found.push(one(dir, view, Some(&sub), trials, threads)?);
+                found.push(one(dir, view, Some(&sub), programs, trials, threads)?);
             }
             std::fs::write(
                 out.join("best.svg"),
@@ -143,6 +150,7 @@ fn one(
     dir: &Path,
     view: coordinator::run::RunView,
     out: Option<&Path>,
+    programs: &Programs,
     trials: u32,
     threads: usize,
 ) -> Result<Found, Failure> {
@@ -164,7 +172,7 @@ fn one(
             .map_err(|e| Failure::Job(anyhow!("{}: {e}", out.join(&png).display())))
     };
     let job = |e: anyhow::Error| Failure::Job(e);
-    let rows = table_iv(dir, &exp, trials, threads)?;
+    let rows = table_iv(dir, &exp, programs, trials, threads)?;
     let optim2 = rows
         .iter()
         .find(|r| r.name == coordinator::evolve::TABLE_SETS[2])
@@ -260,12 +268,14 @@ fn simspark_types(exp: &Experiment, rows: &[Row]) -> Result<String, Failure> {
 fn table_iv(
     dir: &Path,
     exp: &Experiment,
+    programs: &Programs,
     trials: u32,
     threads: usize,
 ) -> Result<Vec<Row>, Failure> {
     rows_of(
         exp,
         crate::common::replay_run(dir)?.table_sets(),
+        programs,
         trials,
         threads,
     )
@@ -279,19 +289,20 @@ pub(crate) fn table_markdown(
     trials: u32,
     threads: usize,
 ) -> Result<String, Failure> {
-    let rows = rows_of(exp, sets, trials, threads)?;
+    let rows = rows_of(exp, sets, &Programs::default(), trials, threads)?;
     Ok(table_text(exp, &rows, trials).0)
 }
 
 fn rows_of(
     exp: &Experiment,
     sets: Vec<(&'static str, Vec<f64>)>,
+    programs: &Programs,
     trials: u32,
     threads: usize,
 ) -> Result<Vec<Row>, Failure> {
     sets.into_iter()
         .map(|(name, params)| {
-            let runs = run_trials(exp, &params, trials, threads)?;
+            let runs = run_trials(exp, &params, programs, trials, threads)?;
             let first = table_request(exp, &params, 0);
             let planned = worker::planned_x_m(&first)
                 .map_err(|e| Failure::Job(anyhow!("Table IV plan of {name}: {e}")))?;
@@ -323,6 +334,7 @@ fn table_request(exp: &Experiment, params: &[f64], k: u32) -> TrialRequest {
         trial: k,
         seed: TABLE_SEED + u64::from(k),
         model: exp.model,
+        program: exp.program.clone(),
         robot_type: exp.robot_type,
         duration_s: exp.trial_duration_s,
         params: exp.full_params(params),
@@ -371,9 +383,19 @@ fn over_plan(r: &Row) -> Option<f64> {
 fn run_trials(
     exp: &Experiment,
     params: &[f64],
+    programs: &Programs,
     trials: u32,
     threads: usize,
 ) -> Result<Vec<(protocol::measurement::Measurement, Option<Footwork>)>, Failure> {
+    if let Some(name) = &exp.program {
+        let program = programs.get(name).ok_or_else(|| {
+            Failure::Usage(anyhow!(
+                "run `{}` runs the program `{name}`: its Table IV needs it, --program {name}=PATH",
+                exp.name
+            ))
+        })?;
+        return program_trials(exp, params, program, programs.timeout, trials, threads);
+    }
     trial::in_parallel(u64::from(trials), threads, |k| {
         let k = k as u32;
         worker::run_trial_with_footwork(&table_request(exp, params, k))
@@ -382,6 +404,51 @@ fn run_trials(
     .map_err(|e| Failure::Job(anyhow!("Table IV trials: {e}")))?
     .into_iter()
     .collect()
+}
+
+/// Table IV's trials of a program's set, `threads` at once (one slot each,
+/// in a scratch directory of the report's own), each as a worker runs it.
+fn program_trials(
+    exp: &Experiment,
+    params: &[f64],
+    program: &worker::program::Program,
+    timeout: std::time::Duration,
+    trials: u32,
+    threads: usize,
+) -> Result<Vec<(protocol::measurement::Measurement, Option<Footwork>)>, Failure> {
+    let scratch = std::env::temp_dir().join(format!("naofarm-report-{}", uuid::Uuid::new_v4()));
+    let lanes = u32::try_from(threads.max(1))
+        .unwrap_or(1)
+        .min(trials.max(1));
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| Failure::Job(e.into()))?;
+    let found = rt.block_on(async {
+        let lane = |slot: u32| {
+            let dir = scratch.join(format!("slot-{slot}"));
+            async move {
+                let mut got = Vec::new();
+                for k in (slot..trials).step_by(lanes as usize) {
+                    let req = table_request(exp, params, k);
+                    let m = worker::program::run(program, &req, slot, &dir, timeout)
+                        .await
+                        .map_err(|e| Failure::Job(anyhow!("Table IV trial {k}: {e}")))?;
+                    got.push((k, m));
+                }
+                Ok::<_, Failure>(got)
+            }
+        };
+        futures_util::future::join_all((0..lanes).map(lane)).await
+    });
+    // Only this report wrote there (a fresh name).
+    let _ = std::fs::remove_dir_all(&scratch);
+    let mut all = Vec::new();
+    for lane in found {
+        all.extend(lane?);
+    }
+    all.sort_by_key(|(k, _)| *k);
+    Ok(all.into_iter().map(|(_, m)| (m, None)).collect())
 }
 
 fn cell(v: Option<f64>) -> String {

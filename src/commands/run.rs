@@ -4,7 +4,7 @@
 use anyhow::anyhow;
 
 use crate::{
-    args::{JobArgs, NetArgs},
+    args::{JobArgs, NetArgs, ProgramArgs},
     common::Failure,
     net::open_session,
     serve::{prepare_run, runtime, serve_with_view, signals, summary},
@@ -17,6 +17,7 @@ pub fn run(
     json: bool,
     listen: Option<&str>,
     tls: Option<std::path::PathBuf>,
+    programs: &ProgramArgs,
 ) -> Result<(), Failure> {
     let n = workers.unwrap_or_else(|| {
         std::thread::available_parallelism()
@@ -57,6 +58,7 @@ pub fn run(
     let prepared = prepare_run(job)?;
     let rt = runtime()?;
     rt.block_on(async {
+        let programs = crate::common::register_programs(programs).await?;
         let session = open_session(ccfg, "coordinator", &coord_net.connect).await?;
         let (run, effects) = prepared.open_beside(&session).await?;
         let endpoint = session
@@ -92,6 +94,7 @@ pub fn run(
             worker_sessions.push(ws.clone());
             let cfg = worker::service::WorkerConfig {
                 slots: 1,
+                programs: programs.clone(),
                 ..worker::service::WorkerConfig::default()
             };
             handles.push(tokio::spawn(worker::service::serve(

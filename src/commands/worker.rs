@@ -6,7 +6,7 @@ use anyhow::anyhow;
 use protocol::params::Shown;
 
 use crate::{
-    args::{NetArgs, WorkerLimits},
+    args::{NetArgs, ProgramArgs, WorkerLimits},
     common::Failure,
     net::open_session,
     serve::{runtime, signals},
@@ -19,6 +19,7 @@ pub fn worker(
     min_trial_ms: u64,
     heartbeat_ms: u64,
     limits: &WorkerLimits,
+    programs: &ProgramArgs,
 ) -> Result<(), Failure> {
     if !(10..=60_000).contains(&heartbeat_ms) {
         return Err(Failure::Usage(anyhow!(
@@ -37,6 +38,11 @@ pub fn worker(
         .map(|m| protocol::TrialModel::parse(m))
         .collect::<Result<Vec<_>, _>>()
         .map_err(|e| Failure::Usage(anyhow!("--models: {e}")))?;
+    if models.contains(&protocol::TrialModel::Program) {
+        return Err(Failure::Usage(anyhow!(
+            "--models: programs are served by name, with --program NAME=PATH"
+        )));
+    }
     if min_trial_ms > 3_600_000 {
         return Err(Failure::Usage(anyhow!(
             "--min-trial-ms {min_trial_ms}: must be at most 3600000"
@@ -60,6 +66,7 @@ pub fn worker(
     }
     let rt = runtime()?;
     let done = rt.block_on(async {
+        wcfg.programs = crate::common::register_programs(programs).await?;
         let session = open_session(cfg, "worker", &net.connect).await?;
         let shutdown = signals();
         let s = worker::service::serve(session.clone(), wcfg, shutdown)

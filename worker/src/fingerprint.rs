@@ -25,6 +25,7 @@ fn probes() -> Vec<TrialRequest> {
         trial: 0,
         seed: 0x6e61_6f66_6172_6d00,
         model,
+        program: None,
         robot_type,
         duration_s,
         params: vec![],

@@ -5,7 +5,9 @@
 //! [`service`] (the zenoh worker), [`share`] (which run gets a free slot:
 //! fair shares by priority), [`fault`] (run-time fault hooks for tests),
 //! [`noise`] (the seeded noise both models draw from), [`fingerprint`] (the
-//! hash of probe trials that tells workers of the same bits).
+//! hash of probe trials that tells workers of the same bits), [`program`]
+//! (trial programs the worker's owner registered: any simulator, run once
+//! per trial with the trial as JSON).
 //! [`run_trial`] is the one trial interface, a pure function of the request.
 //!
 //! This crate must not keep state between trials or decide anything about
@@ -16,6 +18,7 @@ pub mod fault;
 pub mod fingerprint;
 pub mod nao;
 pub mod noise;
+pub mod program;
 pub mod service;
 pub mod share;
 pub mod synthetic;
@@ -30,6 +33,9 @@ pub enum TrialError {
     /// The parameters cannot build a robot.
     #[error("cannot build the robot: {0}")]
     Model(String),
+    /// A program's trial: the worker service runs it ([`program::run`]).
+    #[error("a trial of the program `{0}` runs in the worker service, not as a function")]
+    Program(String),
 }
 
 /// The request's parameters by name (unset ones at expert).
@@ -41,9 +47,12 @@ fn params_of(req: &TrialRequest) -> Result<protocol::params::ParamValues, TrialE
 /// How far the request's walk plans to carry the robot over its trial, m
 /// ([`nao::trial::planned_travel_m`]); none for the synthetic model.
 pub fn planned_x_m(req: &TrialRequest) -> Result<Option<f64>, TrialError> {
+    if req.model != TrialModel::Nao {
+        return Ok(None);
+    }
     let params = params_of(req)?;
     match req.model {
-        TrialModel::Synthetic => Ok(None),
+        TrialModel::Synthetic | TrialModel::Program => Ok(None),
         TrialModel::Nao => nao::trial::planned_travel_m(req.robot_type, &params, req.duration_s)
             .map(Some)
             .map_err(|e| TrialError::Model(e.to_string())),
@@ -54,16 +63,19 @@ pub fn planned_x_m(req: &TrialRequest) -> Result<Option<f64>, TrialError> {
 /// shorter where `step_reach` caps it ([`nao::trial::planned_step_m`]);
 /// none for the synthetic model.
 pub fn planned_step_m(req: &TrialRequest) -> Result<Option<f64>, TrialError> {
+    if req.model != TrialModel::Nao {
+        return Ok(None);
+    }
     let params = params_of(req)?;
     match req.model {
-        TrialModel::Synthetic => Ok(None),
+        TrialModel::Synthetic | TrialModel::Program => Ok(None),
         TrialModel::Nao => nao::trial::planned_step_m(req.robot_type, &params)
             .map(Some)
             .map_err(|e| TrialError::Model(e.to_string())),
     }
 }
 
-/// Runs one trial: a pure function of the request.
+/// Runs one trial of a built-in model: a pure function of the request.
 pub fn run_trial(req: &TrialRequest) -> Result<Measurement, TrialError> {
     run_trial_with_footwork(req).map(|(m, _)| m)
 }
@@ -73,8 +85,12 @@ pub fn run_trial(req: &TrialRequest) -> Result<Measurement, TrialError> {
 pub fn run_trial_with_footwork(
     req: &TrialRequest,
 ) -> Result<(Measurement, Option<nao::footwork::Footwork>), TrialError> {
+    if req.model == TrialModel::Program {
+        return Err(TrialError::Program(req.program.clone().unwrap_or_default()));
+    }
     let params = params_of(req)?;
     match req.model {
+        TrialModel::Program => Err(TrialError::Program(req.program.clone().unwrap_or_default())),
         TrialModel::Synthetic => Ok((synthetic::trial(&params, req.seed, req.duration_s), None)),
         TrialModel::Nao => {
             let t = nao::trial::run(
@@ -103,6 +119,7 @@ mod tests {
             trial: 0,
             seed: 3,
             model: TrialModel::Nao,
+            program: None,
             robot_type: 0,
             duration_s: 2.0,
             params: vec![],

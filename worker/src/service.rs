@@ -49,6 +49,8 @@ pub struct WorkerConfig {
     pub max_substeps: u32,
     /// Trial models served.
     pub models: Vec<TrialModel>,
+    /// Trial programs served, by the name experiments use.
+    pub programs: crate::program::Programs,
 }
 
 impl Default for WorkerConfig {
@@ -64,6 +66,7 @@ impl Default for WorkerConfig {
             max_duration_s: 3600.0,
             max_substeps: 50,
             models: vec![TrialModel::Nao, TrialModel::Synthetic],
+            programs: crate::program::Programs::default(),
         }
     }
 }
@@ -84,6 +87,14 @@ impl WorkerConfig {
                 "{most} physics substeps are beyond this worker's limit of {}",
                 self.max_substeps
             ));
+        }
+        if let Some(p) = &req.program {
+            if self.programs.get(p).is_none() {
+                return Some(format!(
+                    "this worker has not registered a program named `{p}`"
+                ));
+            }
+            return None;
         }
         if !self.models.contains(&req.model) {
             return Some(
@@ -212,6 +223,24 @@ async fn run_one(
     (result, started.elapsed().as_secs_f64())
 }
 
+/// Runs one trial of a registered program in `slot`: its measurement, or why it failed.
+async fn run_program(
+    program: crate::program::Program,
+    req: TrialRequest,
+    slot: u32,
+    scratch: std::path::PathBuf,
+    timeout: Duration,
+) -> (Result<crate::Measurement, String>, f64) {
+    let started = Instant::now();
+    let r = crate::program::run(&program, &req, slot, &scratch, timeout).await;
+    (r, started.elapsed().as_secs_f64())
+}
+
+/// The slot directory of a worker's program trials.
+fn slot_dir(root: &std::path::Path, slot: u32) -> std::path::PathBuf {
+    root.join(format!("slot-{slot}"))
+}
+
 /// A grant as this worker reads it.
 struct Grant {
     /// The grant, with the trials it can read.
@@ -322,6 +351,17 @@ pub async fn serve(
     let mut tell = tokio::time::interval(STATUS_EVERY);
     tell.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let status_key = keys::worker_status(&prefix, &id);
+    // The trial programs' scratch space: this worker's own, removed when it stops.
+    let scratch = std::env::temp_dir().join(format!("naofarm-worker-{id}"));
+    // Each run's program (from its adverts), and the slot each program trial holds.
+    let mut run_program_of: BTreeMap<String, String> = BTreeMap::new();
+    let mut program_slots: BTreeMap<Held, u32> = BTreeMap::new();
+    // The fingerprint this worker asks and answers `run` with.
+    let fingerprint_for = |program: Option<&String>| {
+        program
+            .and_then(|p| cfg.programs.get(p))
+            .map_or(fingerprint, |p| p.fingerprint(fingerprint))
+    };
     let host = host_name();
     let version = env!("CARGO_PKG_VERSION").to_string();
     // When this worker last said anything to each run (a request, an
@@ -333,7 +373,18 @@ pub async fn serve(
             s = adverts.recv_async() => {
                 let Ok(s) = s else { break };
                 match RunAdvert::decode(&s.payload().to_bytes()) {
-                    Ok(ad) => share.advert(&ad, tokio::time::Instant::now()),
+                    Ok(ad) => {
+                        share.advert(&ad, tokio::time::Instant::now());
+                        if let Some(p) = &ad.program {
+                            if cfg.programs.get(p).is_none() {
+                                let why = format!("this worker has not registered a program named `{p}`");
+                                if share.unservable(&ad.id, &why) {
+                                    tracing::info!(run = %ad.id, %why, "this worker will not serve the run");
+                                }
+                            }
+                            run_program_of.insert(ad.id.clone(), p.clone());
+                        }
+                    }
                     Err(e) => tracing::debug!(error = %e, "ignored an advert"),
                 }
             }
@@ -387,9 +438,21 @@ pub async fn serve(
                             continue;
                         }
                         tracing::debug!(run, iteration = req.iteration, trial = req.trial, "trial started");
-                        held.insert((req.run.clone(), req.iteration, req.trial), req.clone());
+                        let key = (req.run.clone(), req.iteration, req.trial);
+                        held.insert(key.clone(), req.clone());
                         let tx = tx.clone();
                         let min_trial = cfg.min_trial;
+                        if let Some(program) = req.program.as_ref().and_then(|p| cfg.programs.get(p)) {
+                            // The lowest slot no program trial holds.
+                            let slot = (0..).find(|s| !program_slots.values().any(|u| u == s)).unwrap_or(0);
+                            program_slots.insert(key, slot);
+                            let (program, dir, timeout) = (program.clone(), slot_dir(&scratch, slot), cfg.programs.timeout);
+                            tokio::spawn(async move {
+                                let (r, wall) = run_program(program, req.clone(), slot, dir, timeout).await;
+                                let _ = tx.send(Done::Trial(req, r, wall));
+                            });
+                            continue;
+                        }
                         tokio::spawn(async move {
                             let (r, wall) = run_one(req.clone(), min_trial).await;
                             let _ = tx.send(Done::Trial(req, r, wall));
@@ -398,14 +461,17 @@ pub async fn serve(
                     summary.most_held = summary.most_held.max(u32::try_from(held.len()).unwrap_or(u32::MAX));
                 }
                 Done::Trial(req, result, wall) => {
-                    if held.remove(&(req.run.clone(), req.iteration, req.trial)).is_none() {
+                    let key = (req.run.clone(), req.iteration, req.trial);
+                    program_slots.remove(&key);
+                    if held.remove(&key).is_none() {
                         continue; // given back already (shutdown)
                     }
                     share.done(&req.run, Some(wall));
                     let fkeys = FleetKeys::new(&prefix, &req.run);
                     match result {
                         Ok(m) => {
-                            let mut o = TrialOutcome::answer(&req, id.clone(), fingerprint, m, wall);
+                            let fp = fingerprint_for(req.program.as_ref());
+                            let mut o = TrialOutcome::answer(&req, id.clone(), fp, m, wall);
                             crate::fault::tamper(&mut o);
                             put_message(&session, &fkeys.outcomes(), &o).await;
                             spoke.insert(req.run.clone(), Instant::now());
@@ -468,6 +534,9 @@ pub async fn serve(
         if free > 0 {
             for (run, want) in share.pick(free, cfg.max_duration_s) {
                 asking += want;
+                let program = run_program_of
+                    .get(&run)
+                    .filter(|p| cfg.programs.get(p).is_some());
                 let req = WorkRequest {
                     worker: id.clone(),
                     want,
@@ -475,7 +544,8 @@ pub async fn serve(
                     busy,
                     max_duration_s: cfg.max_duration_s,
                     version: version.clone(),
-                    fingerprint,
+                    fingerprint: fingerprint_for(program),
+                    program: program.cloned(),
                 };
                 let key = FleetKeys::new(&prefix, &run).work();
                 spoke.insert(run.clone(), Instant::now());
@@ -515,6 +585,12 @@ pub async fn serve(
     if let Err(e) = token.undeclare().await {
         tracing::warn!(error = %e, "undeclaring the liveliness token failed");
     }
+    // Only this worker ever wrote there (its id is in the name).
+    if scratch.exists() {
+        if let Err(e) = std::fs::remove_dir_all(&scratch) {
+            tracing::warn!(dir = %scratch.display(), error = %e, "the programs' scratch space was not removed");
+        }
+    }
     tracing::info!(worker = %id, trials = summary.trials, "worker stopped");
     Ok(summary)
 }
@@ -531,6 +607,7 @@ mod tests {
             trial: k,
             seed: 7,
             model: TrialModel::Synthetic,
+            program: None,
             robot_type: 0,
             duration_s: 1.0,
             params,

@@ -321,6 +321,7 @@ mod tests {
             running: 0,
             state: RunState::Running,
             duration_s: 10.0,
+            program: None,
             seq,
         }
     }

@@ -66,6 +66,21 @@ pub(super) fn fingerprint_fits(
     Ok(Some(why))
 }
 
+/// Why `req`'s worker may not run this run's trials for want of the run's
+/// trial program (it did not register one of that name), if so.
+fn program_misfit(exp: &protocol::Experiment, req: &WorkRequest) -> Option<String> {
+    match (&exp.program, &req.program) {
+        (Some(ours), Some(theirs)) if ours == theirs => None,
+        (Some(ours), _) => Some(format!(
+            "program: this run's trials run the program `{ours}`, which this worker has not registered"
+        )),
+        (None, Some(theirs)) => Some(format!(
+            "program: this run runs no program, the worker offered `{theirs}`"
+        )),
+        (None, None) => None,
+    }
+}
+
 /// A resumed run whose every live worker asked with another fingerprint
 /// than the journaled one (and none with it) ends at once: its history
 /// could not go on with the same bits.
@@ -113,7 +128,14 @@ pub(super) async fn on_work(st: &mut State, q: &zenoh::query::Query) -> Result<(
     let mut note = None;
     let mut trials = Vec::new();
     let misfit = if state == RunState::Running {
-        fingerprint_fits(st, &req)?
+        // Before the fingerprint: a worker without the program pins nothing.
+        match program_misfit(&st.facts.experiment, &req) {
+            Some(why) => {
+                st.refuse(&req.worker, "work request without the run's program");
+                Some(why)
+            }
+            None => fingerprint_fits(st, &req)?,
+        }
     } else {
         None
     };
@@ -356,29 +378,11 @@ pub(super) async fn put_json(session: &Session, key: &str, body: String) {
     }
 }
 
-/// The most a trial's torso can travel, m.
-pub const PLAUSIBLE_DISTANCE_M: f64 = 100.0;
+pub use protocol::measurement::PLAUSIBLE_DISTANCE_M;
 
 /// Whether an outcome could be a real trial of `duration_s`.
 pub(super) fn plausible(o: &TrialOutcome, duration_s: f64) -> Result<(), String> {
-    if o.x_m.abs() > PLAUSIBLE_DISTANCE_M || o.y_m.abs() > PLAUSIBLE_DISTANCE_M {
-        return Err(format!(
-            "x {} m, y {} m (beyond {PLAUSIBLE_DISTANCE_M} m)",
-            o.x_m, o.y_m
-        ));
-    }
-    if !(0.0..=duration_s + 1e-6).contains(&o.sim_time_s) {
-        return Err(format!(
-            "simulated time {} s outside [0, {duration_s}] s",
-            o.sim_time_s
-        ));
-    }
-    if o.fall_time_s
-        .is_some_and(|t| t > o.sim_time_s + 1e-9 || t < 0.0)
-    {
-        return Err("fall time after the simulated time".into());
-    }
-    Ok(())
+    o.measurement().plausible(duration_s)
 }
 
 pub(super) fn on_outcome(st: &mut State, o: TrialOutcome) -> Result<(), ServiceError> {

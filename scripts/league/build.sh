@@ -1,0 +1,134 @@
+#!/usr/bin/env bash
+# Builds the league's server (SimSpark + rcssserver3d) and UT Austin Villa's
+# agent for naofarm's `league` trial program, into a cache outside the clone.
+#
+#   scripts/league/build.sh SOURCE [CACHE]
+#
+# SOURCE holds simspark-*rcssserver3d-*.tar.gz and utaustinvilla3d*.tar.gz
+# (as ../shared/third-party does), or those trees unpacked. CACHE defaults to
+# $NAOFARM_LEAGUE_CACHE, else ~/.cache/naofarm/league. The build goes into
+# CACHE/<key>, where the key hashes the sources, the patches and this
+# script: a second call with the same inputs builds nothing. The last line
+# printed is the trial program to register with a worker:
+#
+#   naofarm worker --program league=CACHE/<key>/bin/league-trial
+#
+# Debian packages it needs (installed by .ci/run): cmake g++ make libode-dev
+# libsdl1.2-dev ruby ruby-dev libdevil-dev libboost-dev libboost-thread-dev
+# libboost-regex-dev libboost-system-dev libgl-dev libglu1-mesa-dev
+# libfreetype-dev python3.
+set -euo pipefail
+
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+usage() {
+    echo "usage: $0 SOURCE [CACHE]" >&2
+    exit 2
+}
+[[ $# -ge 1 && $# -le 2 ]] || usage
+source_dir="$1"
+cache="${2:-${NAOFARM_LEAGUE_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/naofarm/league}}"
+[[ -d "$source_dir" ]] || {
+    echo "$0: SOURCE $source_dir is not a directory" >&2
+    exit 2
+}
+source_dir="$(cd "$source_dir" && pwd)"
+
+# One source: a tarball matching $1 or an unpacked tree matching $2.
+find_source() {
+    local tarball tree
+    tarball="$(find "$source_dir" -maxdepth 1 -name "$1" -type f | sort | head -n 1)"
+    tree="$(find "$source_dir" -maxdepth 1 -name "$2" -type d | sort | head -n 1)"
+    if [[ -n "$tarball" ]]; then
+        echo "$tarball"
+    elif [[ -n "$tree" ]]; then
+        echo "$tree"
+    else
+        echo "$0: no $1 nor $2 in $source_dir" >&2
+        exit 1
+    fi
+}
+spark_src="$(find_source 'simspark-*rcssserver3d-*.tar.gz' 'simspark-*rcssserver3d-*')"
+ut_src="$(find_source 'utaustinvilla3d*.tar.gz' 'utaustinvilla3d*')"
+
+# What the build is made of, for the cache key.
+digest_of() {
+    if [[ -f "$1" ]]; then
+        sha256sum <"$1"
+    else
+        (cd "$1" && find . -type f ! -path './build/*' -print0 | sort -z |
+            xargs -0 sha256sum) | sha256sum
+    fi
+}
+# Raise when the build steps below change what they make.
+build_steps=1
+key="$({
+    echo "$build_steps"
+    digest_of "$spark_src"
+    digest_of "$ut_src"
+    cat "$here"/patches/*.patch
+} | sha256sum | cut -c1-16)"
+prefix="$cache/$key"
+# The trial program is copied on every call: it is not part of the build.
+install_trial() {
+    mkdir -p "$prefix/bin"
+    cp "$here/league-trial" "$prefix/bin/league-trial.new"
+    chmod +x "$prefix/bin/league-trial.new"
+    mv "$prefix/bin/league-trial.new" "$prefix/bin/league-trial"
+    echo "$prefix/bin/league-trial"
+}
+if [[ -f "$prefix/.built" ]]; then
+    echo "league build $key is cached in $prefix"
+    install_trial
+    exit 0
+fi
+
+work="$cache/.work-$key"
+rm -rf "$work" "$prefix"
+mkdir -p "$work" "$prefix"
+# A failed step names its log; the half-made build is left for a look and
+# replaced by the next call.
+trap 'echo "$0: the league build failed; its logs are in $work" >&2' ERR
+unpack() {
+    if [[ -f "$1" ]]; then
+        tar -xzf "$1" -C "$work"
+    else
+        cp -r "$1" "$work/"
+    fi
+}
+unpack "$spark_src"
+unpack "$ut_src"
+spark_tree="$(find "$work" -maxdepth 1 -name 'simspark-*rcssserver3d-*' -type d)"
+ut_tree="$(find "$work" -maxdepth 1 -name 'utaustinvilla3d*' -type d)"
+patch -d "$spark_tree" -p1 --forward <"$here/patches/simspark-rcssserver3d.patch"
+patch -d "$ut_tree" -p1 --forward <"$here/patches/utaustinvilla3d.patch"
+
+jobs="$(nproc)"
+echo "building SimSpark into $prefix"
+cmake -S "$spark_tree/spark" -B "$spark_tree/spark/build" \
+    -DCMAKE_BUILD_TYPE=Release -DBUILD_CARBON=OFF \
+    -DCMAKE_INSTALL_PREFIX="$prefix" >"$work/spark-cmake.log" 2>&1
+make -C "$spark_tree/spark/build" -j"$jobs" install >"$work/spark-make.log" 2>&1
+
+echo "building rcssserver3d"
+SPARK_DIR="$prefix" cmake -S "$spark_tree/rcssserver3d" \
+    -B "$spark_tree/rcssserver3d/build" -DCMAKE_BUILD_TYPE=Release \
+    -DCMAKE_INSTALL_PREFIX="$prefix" >"$work/server-cmake.log" 2>&1
+make -C "$spark_tree/rcssserver3d/build" -j"$jobs" install >"$work/server-make.log" 2>&1
+
+echo "building UT Austin Villa's agent"
+cmake -S "$ut_tree" -B "$ut_tree/build" -DCMAKE_BUILD_TYPE=Release \
+    -DRCSSNET3D_INCLUDE_DIR="$spark_tree/spark/utility" \
+    -DRCSSNET3D_LIBRARY="$prefix/lib/simspark/librcssnet3D.so" \
+    -DCMAKE_CXX_FLAGS="-Wall -Wno-unused -I$spark_tree/spark/lib -I$spark_tree/spark/build" \
+    >"$work/agent-cmake.log" 2>&1
+make -C "$ut_tree/build" -j"$jobs" >"$work/agent-make.log" 2>&1
+
+# The agent reads ./skills/*.skl and its parameter files from where it runs.
+mkdir -p "$prefix/agent/skills"
+cp "$ut_tree/build/agentspark" "$prefix/agent/"
+cp -r "$ut_tree/paramfiles" "$prefix/agent/"
+cp "$ut_tree"/skills/*.skl "$prefix/agent/skills/"
+echo "$key" >"$prefix/.built"
+rm -rf "$work"
+echo "league build $key is in $prefix"
+install_trial

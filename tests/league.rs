@@ -1,0 +1,189 @@
+//! The league's own server on the farm: scripts/league/build.sh builds
+//! SimSpark, rcssserver3d and UT Austin Villa's agent from the third-party
+//! sources (into a cache outside the clone: a machine that keeps its files
+//! builds once), and a farm run of the `league` program on the real server
+//! is journaled, killed mid-run and resumed.
+#![allow(clippy::unwrap_used)]
+
+mod util;
+
+use std::{
+    io::{BufRead, BufReader},
+    path::{Path, PathBuf},
+    process::{Command, Stdio},
+    time::{Duration, Instant},
+};
+
+use coordinator::journal::{Journal, Record};
+use util::{naofarm, root, scratch, succeed};
+
+/// The league build's trial program, building it if the cache lacks it.
+/// The sources: `$NAOFARM_LEAGUE_SOURCE`, else ../shared/third-party.
+fn league_program() -> PathBuf {
+    let source = std::env::var_os("NAOFARM_LEAGUE_SOURCE")
+        .map_or_else(|| root().join("../shared/third-party"), PathBuf::from);
+    assert!(
+        source.is_dir(),
+        "the league's sources are not at {} (set NAOFARM_LEAGUE_SOURCE to the directory \
+         with the SimSpark and UT Austin Villa tarballs)",
+        source.display()
+    );
+    let out = Command::new(root().join("scripts/league/build.sh"))
+        .arg(&source)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "the league build failed: {stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let program = PathBuf::from(stdout.lines().last().unwrap().trim());
+    assert!(program.is_file(), "{}", program.display());
+    program
+}
+
+/// The league experiment cut to a test's size: 3 iterations of 4 walks of 4 s.
+fn small_league(dir: &Path) -> PathBuf {
+    let text = std::fs::read_to_string(root().join("experiments/league.toml"))
+        .unwrap()
+        .replace("iterations = 150", "iterations = 3")
+        .replace("trials_per_iteration = 10", "trials_per_iteration = 4")
+        .replace("trial_duration_s = 10.0", "trial_duration_s = 4.0")
+        .replace("pipeline_depth = 4", "pipeline_depth = 2")
+        .replace("n_mcmc = 1000", "n_mcmc = 100");
+    let p = dir.join("league.toml");
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+fn run(exp: &Path, out: &Path, program: &Path) -> Command {
+    let mut cmd = naofarm();
+    cmd.args(["run", "--json", "--workers", "2"])
+        .arg(exp)
+        .arg("--out")
+        .arg(out)
+        .arg("--program")
+        .arg(format!("league={}", program.display()));
+    cmd
+}
+
+/// Every live (not zombie) process: (pid, parent pid, name).
+fn processes() -> Vec<(u32, u32, String)> {
+    let mut found = Vec::new();
+    for e in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Ok(pid) = e.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        let Ok(stat) = std::fs::read_to_string(e.path().join("stat")) else {
+            continue;
+        };
+        // pid (comm) state ppid ...: the name may hold spaces, not `)`.
+        let Some((head, rest)) = stat.rsplit_once(')') else {
+            continue;
+        };
+        let name = head.split_once('(').map_or("", |(_, n)| n).to_string();
+        let mut fields = rest.split_whitespace();
+        let state = fields.next().unwrap_or("");
+        let ppid = fields.next().and_then(|p| p.parse().ok()).unwrap_or(0);
+        if state != "Z" {
+            found.push((pid, ppid, name));
+        }
+    }
+    found
+}
+
+/// The processes descended from `root` (not itself).
+fn descendants(root: u32) -> Vec<(u32, String)> {
+    let all = processes();
+    let mut tree = vec![root];
+    let mut found = Vec::new();
+    while let Some(p) = tree.pop() {
+        for (pid, ppid, name) in &all {
+            if *ppid == p {
+                tree.push(*pid);
+                found.push((*pid, name.clone()));
+            }
+        }
+    }
+    found
+}
+
+#[test]
+fn a_league_run_on_the_real_server_is_journaled_killed_and_resumed() {
+    let program = league_program();
+    let dir = scratch("league");
+    let exp = small_league(&dir);
+    let out = dir.join("run");
+
+    // The first run: killed (SIGKILL) once it has decided an iteration.
+    let mut first = run(&exp, &out, &program)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let lines = BufReader::new(first.stdout.take().unwrap()).lines();
+    let mut decided = Vec::new();
+    for line in lines.map_while(Result::ok) {
+        if line.starts_with("{\"event\":\"decided\"") {
+            decided.push(serde_json::from_str::<serde_json::Value>(&line).unwrap());
+            break;
+        }
+    }
+    // Its trials in flight: the programs, their servers and agents.
+    let in_flight = descendants(first.id());
+    assert!(
+        in_flight.iter().any(|(_, n)| n == "rcssserver3d"),
+        "trials were in flight: {in_flight:?}"
+    );
+    first.kill().unwrap();
+    first.wait().unwrap();
+    assert_eq!(decided.len(), 1, "the first run decided an iteration");
+    // The expert (UT's type-0 walk on the NAO's body) walks, on the real server.
+    let stats = &decided[0]["result"]["stats"];
+    assert_eq!(stats["s"], 1.0, "{stats}");
+    assert!(stats["mx"].as_f64().unwrap() > 1.0, "{stats}");
+    // The killed run's programs, servers and agents do not outlive it.
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        let live: Vec<u32> = processes().iter().map(|(p, _, _)| *p).collect();
+        let left: Vec<&(u32, String)> =
+            in_flight.iter().filter(|(p, _)| live.contains(p)).collect();
+        if left.is_empty() {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the killed run's trials live on: {left:?}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+
+    // Resumed: the same directory, the same command.
+    succeed(&mut run(&exp, &out, &program));
+    let records = Journal::read(&out).unwrap().records();
+    let mut trials = std::collections::BTreeSet::new();
+    for r in &records {
+        if let Record::Outcome {
+            iteration, trial, ..
+        } = r
+        {
+            assert!(trials.insert((*iteration, *trial)), "journaled twice");
+        }
+    }
+    assert_eq!(
+        trials.len(),
+        3 * 4,
+        "every trial of the 3 iterations journaled once"
+    );
+    let check = succeed(naofarm().args(["journal", "check", "--json"]).arg(&out));
+    let v: serde_json::Value = serde_json::from_slice(&check.stdout).unwrap();
+    assert_eq!(v["decided"], 3);
+    // The first decision is the journal's, unchanged by the resume.
+    let history = succeed(naofarm().args(["history", "--json"]).arg(&out));
+    let rows: serde_json::Value = serde_json::from_slice(&history.stdout).unwrap();
+    assert_eq!(rows.as_array().unwrap().len(), 3);
+    for k in ["s", "mx", "my"] {
+        assert_eq!(rows[0][k], stats[k], "{k} of iteration 0");
+    }
+}

@@ -1,0 +1,494 @@
+//! Trial programs: simulators of the worker owner's choosing, registered by
+//! name when the worker starts (`naofarm worker --program NAME=PATH`), run
+//! once per trial. The contract (docs/programs.md): the trial goes to the
+//! program's standard input as one JSON document ([`ProgramTrial`]); the
+//! program prints its measurement as the last line of its standard output
+//! ([`ProgramMeasurement`]) and exits 0. Anything else — a non-zero exit,
+//! no answer within the worker's time-out (the program and everything it
+//! started are killed), junk, a NaN, an implausible value — is a failed
+//! trial whose reason carries the last lines of the program's standard
+//! error.
+//!
+//! A coordinator names a program, never a path: only what the worker's
+//! owner registered runs. The program's identity (a hash of its file and of
+//! its `--version` line) joins the worker's fingerprint for the program's
+//! runs, so a run never mixes two builds of a program.
+
+use std::{
+    collections::BTreeMap,
+    path::{Path, PathBuf},
+    process::Stdio,
+    time::Duration,
+};
+
+use protocol::{measurement::Measurement, TrialRequest};
+use serde::{Deserialize, Serialize};
+use sha3::{Digest, Sha3_256};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+
+/// How long `PROGRAM --version` may take when the worker registers it.
+const VERSION_WITHIN: Duration = Duration::from_secs(10);
+/// Most bytes of a program's standard output read (the measurement is its last line).
+const MOST_STDOUT: usize = 1 << 20;
+/// Bytes of a program's standard error kept for a failure's reason.
+const STDERR_TAIL: usize = 600;
+/// How long the pipes may stay open once the program's group is killed (a
+/// process that left the group may hold them).
+const PIPES_WITHIN: Duration = Duration::from_secs(2);
+
+/// Why a program could not be registered.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum ProgramError {
+    /// The `NAME=PATH` text is not one.
+    #[error("--program {0}: expected NAME=PATH")]
+    Syntax(String),
+    /// The name is not a program name.
+    #[error("--program {name}: {message}")]
+    Name {
+        /// The name given.
+        name: String,
+        /// What is wrong with it.
+        message: String,
+    },
+    /// The path is not an executable file.
+    #[error("--program {name}={path}: {message}")]
+    Path {
+        /// The program's name.
+        name: String,
+        /// The path given.
+        path: String,
+        /// What is wrong with it.
+        message: String,
+    },
+    /// The same name twice.
+    #[error("--program {0} is registered twice")]
+    Twice(String),
+}
+
+/// One registered program.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Program {
+    /// The name experiments use.
+    pub name: String,
+    /// The executable, as an absolute path.
+    pub path: PathBuf,
+    /// The first line of `PROGRAM --version`, when it answers with exit 0.
+    pub version: Option<String>,
+    /// Hash of the file's bytes and of `version`: the program's build.
+    pub identity: u64,
+}
+
+/// The programs a worker serves, with how long one trial may take.
+#[derive(Debug, Clone, Default)]
+pub struct Programs {
+    /// The programs by name.
+    pub by_name: BTreeMap<String, Program>,
+    /// Longest wall time of one trial before the program is killed.
+    pub timeout: Duration,
+}
+
+impl Programs {
+    /// The program registered as `name`, if any.
+    #[must_use]
+    pub fn get(&self, name: &str) -> Option<&Program> {
+        self.by_name.get(name)
+    }
+
+    /// Registers `NAME=PATH` texts (from the command line); a name twice is an error.
+    pub async fn register(specs: &[String], timeout: Duration) -> Result<Self, ProgramError> {
+        let mut by_name = BTreeMap::new();
+        for spec in specs {
+            let (name, path) = spec
+                .split_once('=')
+                .ok_or_else(|| ProgramError::Syntax(spec.clone()))?;
+            let p = Program::register(name, Path::new(path)).await?;
+            if by_name.insert(name.to_string(), p).is_some() {
+                return Err(ProgramError::Twice(name.to_string()));
+            }
+        }
+        Ok(Self { by_name, timeout })
+    }
+}
+
+impl Program {
+    /// Registers the executable at `path` as `name`: checks both, hashes the
+    /// file and asks it `--version` (10 s at most; no answer is no version).
+    pub async fn register(name: &str, path: &Path) -> Result<Self, ProgramError> {
+        protocol::experiment::check_program_name(name).map_err(|message| ProgramError::Name {
+            name: name.to_string(),
+            message,
+        })?;
+        let bad = |message: String| ProgramError::Path {
+            name: name.to_string(),
+            path: path.display().to_string(),
+            message,
+        };
+        let path = std::fs::canonicalize(path).map_err(|e| bad(e.to_string()))?;
+        let meta = std::fs::metadata(&path).map_err(|e| bad(e.to_string()))?;
+        if !meta.is_file() {
+            return Err(bad("not a file".into()));
+        }
+        if std::os::unix::fs::PermissionsExt::mode(&meta.permissions()) & 0o111 == 0 {
+            return Err(bad("not executable".into()));
+        }
+        let bytes = std::fs::read(&path).map_err(|e| bad(e.to_string()))?;
+        let version = version_line(&path).await;
+        let mut h = Sha3_256::new();
+        h.update(&bytes);
+        h.update(version.as_deref().unwrap_or("").as_bytes());
+        let d = h.finalize();
+        let mut b = [0u8; 8];
+        b.copy_from_slice(&d[..8]);
+        Ok(Self {
+            name: name.to_string(),
+            path,
+            version,
+            identity: u64::from_le_bytes(b),
+        })
+    }
+
+    /// The worker's fingerprint for this program's runs: its own, mixed with
+    /// the program's identity.
+    #[must_use]
+    pub fn fingerprint(&self, worker: u64) -> u64 {
+        let mut h = Sha3_256::new();
+        h.update(worker.to_le_bytes());
+        h.update(self.name.as_bytes());
+        h.update(self.identity.to_le_bytes());
+        let d = h.finalize();
+        let mut b = [0u8; 8];
+        b.copy_from_slice(&d[..8]);
+        u64::from_le_bytes(b)
+    }
+}
+
+/// The first line of `path --version`, if it says one with exit 0 in time.
+async fn version_line(path: &Path) -> Option<String> {
+    let mut cmd = tokio::process::Command::new(path);
+    cmd.arg("--version")
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .process_group(0)
+        .kill_on_drop(true);
+    let child = cmd.spawn().ok()?;
+    let pgid = child.id();
+    let out = tokio::time::timeout(VERSION_WITHIN, child.wait_with_output()).await;
+    kill_group(pgid);
+    let out = out.ok()?.ok()?;
+    if !out.status.success() {
+        return None;
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    let line = text.lines().next()?.trim();
+    (!line.is_empty()).then(|| line.chars().take(200).collect())
+}
+
+/// What a program reads on its standard input: one trial.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ProgramTrial {
+    /// Run id.
+    pub run: String,
+    /// CLOP iteration.
+    pub iteration: u64,
+    /// Trial index within the iteration.
+    pub trial: u32,
+    /// The trial's seed.
+    pub seed: u64,
+    /// Simulated duration, s.
+    pub duration_s: f64,
+    /// League robot type 0–4 (the experiment's `robot_type`).
+    pub robot_type: u8,
+    /// Every parameter by name, in the program's own units.
+    pub params: BTreeMap<String, f64>,
+    /// The worker's slot the trial runs in (0 ..< slots): no two trials of
+    /// this worker run in one slot at once.
+    pub slot: u32,
+    /// A directory of the slot's own (kept across its trials, removed when
+    /// the worker stops): scratch space, nobody else's.
+    pub scratch: PathBuf,
+}
+
+/// What a program prints as the last line of its standard output.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProgramMeasurement {
+    /// Forward travel, m.
+    pub x_m: f64,
+    /// Sideways travel (left), m.
+    pub y_m: f64,
+    /// Whether the robot fell.
+    pub fell: bool,
+    /// When it fell, simulated s (present exactly when it fell).
+    #[serde(default)]
+    pub fall_time_s: Option<f64>,
+    /// Simulated time run, s.
+    pub sim_time_s: f64,
+}
+
+/// A program's process group, killed when this is dropped: also when the
+/// trial's task is (the worker stopping mid-trial), so that nothing the
+/// program started outlives the trial.
+struct Group(Option<u32>);
+
+impl Drop for Group {
+    fn drop(&mut self) {
+        kill_group(self.0);
+    }
+}
+
+/// Kills a process group (the program and what it started); one already gone is fine.
+fn kill_group(pgid: Option<u32>) {
+    if let Some(id) = pgid.and_then(|p| i32::try_from(p).ok()) {
+        let _ = nix::sys::signal::killpg(
+            nix::unistd::Pid::from_raw(id),
+            nix::sys::signal::Signal::SIGKILL,
+        );
+    }
+}
+
+/// The last `STDERR_TAIL` bytes of `err`, as text on one line.
+fn tail(err: &[u8]) -> String {
+    let text = String::from_utf8_lossy(err);
+    let lines: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
+    let mut out = lines[lines.len().saturating_sub(5)..].join(" | ");
+    if out.len() > STDERR_TAIL {
+        let mut cut = out.len() - STDERR_TAIL;
+        while !out.is_char_boundary(cut) {
+            cut += 1;
+        }
+        out = format!("…{}", &out[cut..]);
+    }
+    if out.is_empty() {
+        "(nothing on standard error)".into()
+    } else {
+        format!("standard error: {out}")
+    }
+}
+
+/// Reads a program's answer: its last non-empty line of standard output,
+/// checked for sense against the trial asked.
+pub fn read_answer(stdout: &[u8], req: &TrialRequest) -> Result<Measurement, String> {
+    let text = String::from_utf8_lossy(stdout);
+    let Some(line) = text.lines().rev().find(|l| !l.trim().is_empty()) else {
+        return Err("printed no measurement".into());
+    };
+    let shown: String = line.chars().take(120).collect();
+    let m: ProgramMeasurement = serde_json::from_str(line.trim())
+        .map_err(|e| format!("printed `{shown}`, not a measurement: {e}"))?;
+    let m = Measurement {
+        fell: m.fell,
+        x_m: m.x_m,
+        y_m: m.y_m,
+        fall_time_s: m.fall_time_s,
+        sim_time_s: m.sim_time_s,
+    };
+    m.check().map_err(|e| format!("printed `{shown}`: {e}"))?;
+    m.plausible(req.duration_s)
+        .map_err(|e| format!("printed `{shown}`, implausible: {e}"))?;
+    Ok(m)
+}
+
+/// Runs one trial of `program`: the trial on its standard input, its
+/// measurement from its standard output; any failure, with why.
+pub async fn run(
+    program: &Program,
+    req: &TrialRequest,
+    slot: u32,
+    scratch: &Path,
+    timeout: Duration,
+) -> Result<Measurement, String> {
+    let who = format!("program `{}`", program.name);
+    let input = ProgramTrial {
+        run: req.run.clone(),
+        iteration: req.iteration,
+        trial: req.trial,
+        seed: req.seed,
+        duration_s: req.duration_s,
+        robot_type: req.robot_type,
+        params: req.params.iter().cloned().collect(),
+        slot,
+        scratch: scratch.to_path_buf(),
+    };
+    let input = serde_json::to_vec(&input).map_err(|e| format!("{who}: the trial: {e}"))?;
+    std::fs::create_dir_all(scratch)
+        .map_err(|e| format!("{who}: scratch {}: {e}", scratch.display()))?;
+    let mut cmd = tokio::process::Command::new(&program.path);
+    cmd.current_dir(scratch)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .process_group(0)
+        .kill_on_drop(true);
+    let mut child = cmd
+        .spawn()
+        .map_err(|e| format!("{who} did not start: {e}"))?;
+    let group = Group(child.id());
+    let (Some(mut stdin), Some(mut stdout), Some(mut stderr)) =
+        (child.stdin.take(), child.stdout.take(), child.stderr.take())
+    else {
+        return Err(format!("{who}: its pipes could not be opened"));
+    };
+    tokio::spawn(async move {
+        // A program that does not read its input is its own business.
+        let _ = stdin.write_all(&input).await;
+        let _ = stdin.shutdown().await;
+    });
+    let read_out = tokio::spawn(async move {
+        let mut buf = Vec::new();
+        let _ = (&mut stdout)
+            .take(MOST_STDOUT as u64)
+            .read_to_end(&mut buf)
+            .await;
+        buf
+    });
+    let read_err = tokio::spawn(async move {
+        let mut buf = Vec::new();
+        let mut chunk = [0u8; 4096];
+        while let Ok(n) = stderr.read(&mut chunk).await {
+            if n == 0 {
+                break;
+            }
+            buf.extend_from_slice(&chunk[..n]);
+            if buf.len() > 4 * STDERR_TAIL {
+                buf.drain(..buf.len() - 2 * STDERR_TAIL);
+            }
+        }
+        buf
+    });
+    let ended = tokio::time::timeout(timeout, child.wait()).await;
+    // Whatever it started and left running goes with it (and with them
+    // the last ends of its pipes).
+    drop(group);
+    let _ = child.kill().await;
+    let drained = |h: tokio::task::JoinHandle<Vec<u8>>| async move {
+        match tokio::time::timeout(PIPES_WITHIN, h).await {
+            Ok(Ok(b)) => b,
+            _ => Vec::new(),
+        }
+    };
+    let (out, err) = (drained(read_out).await, drained(read_err).await);
+    let Ok(status) = ended else {
+        return Err(format!(
+            "{who} did not answer within {} s; it and every process it started were killed; {}",
+            timeout.as_secs_f64(),
+            tail(&err)
+        ));
+    };
+    let status = status.map_err(|e| format!("{who}: {e}"))?;
+    if !status.success() {
+        let how = status.code().map_or_else(
+            || "was killed by a signal".to_string(),
+            |c| format!("exited with status {c}"),
+        );
+        return Err(format!("{who} {how}; {}", tail(&err)));
+    }
+    read_answer(&out, req).map_err(|e| format!("{who} {e}; {}", tail(&err)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::{Physics, TrialModel};
+
+    fn req() -> TrialRequest {
+        TrialRequest {
+            run: "r".into(),
+            iteration: 1,
+            trial: 2,
+            seed: 3,
+            model: TrialModel::Program,
+            program: Some("p".into()),
+            robot_type: 0,
+            duration_s: 10.0,
+            params: vec![("a".into(), 1.5)],
+            dispatch: 0,
+            physics: Physics::default(),
+        }
+    }
+
+    #[test]
+    fn an_answer_is_the_last_line_and_must_make_sense() {
+        let good = b"log line\n{\"x_m\":1.5,\"y_m\":-0.2,\"fell\":false,\"sim_time_s\":10.0}\n\n";
+        let m = read_answer(good, &req()).expect("a good answer");
+        assert_eq!(
+            (m.x_m, m.y_m, m.fell, m.sim_time_s),
+            (1.5, -0.2, false, 10.0)
+        );
+        for (out, why) in [
+            (&b""[..], "printed no measurement"),
+            (b"hello", "not a measurement"),
+            (
+                b"{\"x_m\":NaN,\"y_m\":0,\"fell\":false,\"sim_time_s\":10}",
+                "not a measurement",
+            ),
+            (
+                b"{\"x_m\":1e9,\"y_m\":0,\"fell\":false,\"sim_time_s\":10}",
+                "beyond 100 m",
+            ),
+            (
+                b"{\"x_m\":1,\"y_m\":0,\"fell\":true,\"sim_time_s\":10}",
+                "fall_time_s",
+            ),
+            (
+                b"{\"x_m\":1,\"y_m\":0,\"fell\":false,\"sim_time_s\":10.02}",
+                "outside [0, 10] s",
+            ),
+            (
+                b"{\"x_m\":1,\"y_m\":0,\"fell\":true,\"fall_time_s\":9,\"sim_time_s\":8}",
+                "fall time after",
+            ),
+            (
+                b"{\"x_m\":1,\"y_m\":0,\"fell\":false,\"sim_time_s\":10,\"z\":1}",
+                "unknown field",
+            ),
+        ] {
+            let e = read_answer(out, &req()).expect_err(why);
+            assert!(e.contains(why), "{e} should say {why}");
+        }
+    }
+
+    #[test]
+    fn a_stderr_tail_keeps_the_last_lines() {
+        let err = (0..20).map(|i| format!("line {i}\n")).collect::<String>();
+        let t = tail(err.as_bytes());
+        assert_eq!(
+            t,
+            "standard error: line 15 | line 16 | line 17 | line 18 | line 19"
+        );
+        assert_eq!(tail(b""), "(nothing on standard error)");
+        let long = "é".repeat(1000);
+        assert!(tail(long.as_bytes()).len() <= STDERR_TAIL + 40);
+    }
+
+    #[tokio::test]
+    async fn registration_refuses_what_is_not_a_program() {
+        let t = Duration::from_secs(1);
+        let plain = std::env::temp_dir().join(format!("naofarm-plain-{}", std::process::id()));
+        std::fs::write(&plain, "#!/bin/sh\n").expect("a temporary file");
+        let not_executable = format!("x={}", plain.display());
+        for (spec, why) in [
+            ("league", "expected NAME=PATH"),
+            ("a/b=/bin/true", "never given as a path"),
+            ("x=/nonexistent/prog", "No such file"),
+            ("x=/tmp", "not a file"),
+            (not_executable.as_str(), "not executable"),
+        ] {
+            let e = Programs::register(&[spec.to_string()], t)
+                .await
+                .expect_err(spec);
+            assert!(e.to_string().contains(why), "{e} should say {why}");
+        }
+        let _ = std::fs::remove_file(&plain);
+        let twice = ["x=/bin/true".to_string(), "x=/bin/false".to_string()];
+        assert_eq!(
+            Programs::register(&twice, t).await.expect_err("twice"),
+            ProgramError::Twice("x".into())
+        );
+        let ok = Programs::register(&["t=/bin/true".to_string()], t)
+            .await
+            .expect("/bin/true is a program");
+        let p = ok.get("t").expect("registered");
+        assert_ne!(p.fingerprint(1), p.fingerprint(2));
+    }
+}
