@@ -176,3 +176,40 @@ fn a_program_is_named_never_given_as_a_path_or_a_command() {
     );
     assert!(e.contains("never given as a path"), "{e}");
 }
+
+#[test]
+fn run_and_report_tune_a_program_on_one_machine() {
+    let dir = scratch("program-run");
+    let exp = root().join("experiments/test/program.toml");
+    let toy = format!("toy={}", root().join("tests/programs/toy").display());
+    let out = dir.join("run");
+    // Without the program the local workers could never serve the run.
+    let err = util::fails(naofarm().arg("run").arg(&exp).arg("--out").arg(&out), 2);
+    assert!(err.contains("--program toy=PATH"), "{err}");
+    assert!(!out.exists(), "nothing written");
+    let ran = util::succeed(
+        naofarm()
+            .args(["run", "--json", "--workers", "2", "--program", &toy])
+            .arg(&exp)
+            .arg("--out")
+            .arg(&out),
+    );
+    let events = util::events(&ran.stdout);
+    assert_eq!(events.decided.len(), 6);
+    // Table IV runs its trials through the program, as a worker does.
+    let err = util::fails(naofarm().args(["report", "--trials", "4"]).arg(&out), 2);
+    assert!(err.contains("--program toy=PATH"), "{err}");
+    util::succeed(
+        naofarm()
+            .args(["report", "--trials", "4", "--program", &toy])
+            .arg(&out),
+    );
+    let table: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report/table4.json")).unwrap())
+            .unwrap();
+    let text = table.to_string();
+    assert!(
+        text.contains("Expert") && text.contains("Optim.1"),
+        "{text}"
+    );
+}

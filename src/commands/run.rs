@@ -55,6 +55,21 @@ pub fn run(
     let ccfg = coord_net
         .zenoh_config("coordinator", &[])
         .map_err(Failure::Usage)?;
+    // Local workers run only what they are given: without the program, a
+    // program's run would wait for workers that never come.
+    let (exp, _) = crate::common::load_experiment(&job.experiment)?;
+    if let Some(p) = &exp.program {
+        let given = programs
+            .programs
+            .iter()
+            .any(|s| s.split_once('=').is_some_and(|(n, _)| n == p));
+        if !given {
+            return Err(Failure::Usage(anyhow!(
+                "{}: its trials run the program `{p}`; give the local workers it with --program {p}=PATH",
+                job.experiment.display()
+            )));
+        }
+    }
     let prepared = prepare_run(job)?;
     let rt = runtime()?;
     rt.block_on(async {

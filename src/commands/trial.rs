@@ -28,10 +28,15 @@ pub fn trial(a: &TrialArgs) -> Result<(), Failure> {
     let trials_ok = (1..=100_000).contains(&a.trials);
     usage_unless(trials_ok, || "--trials must be in 1..=100000".into())?;
     let (exp, start) = start_from(a)?.unzip();
-    let nao = exp.as_ref().is_none_or(|e| e.model == TrialModel::Nao);
-    usage_unless(nao, || {
-        "--experiment: a trial runs the NAO, not `synthetic`".into()
-    })?;
+    if let Some(e) = exp.as_ref().filter(|e| e.model != TrialModel::Nao) {
+        return Err(Failure::Usage(anyhow!(match &e.program {
+            Some(p) => format!(
+                "--experiment: a trial runs the NAO; this run's trials run the program `{p}` \
+                 (`report --program {p}=PATH` runs its Table IV)"
+            ),
+            None => "--experiment: a trial runs the NAO, not `synthetic`".into(),
+        })));
+    }
     let duration = a
         .duration
         .or(exp.as_ref().map(|e| e.trial_duration_s))
