@@ -490,5 +490,13 @@ mod tests {
             .expect("/bin/true is a program");
         let p = ok.get("t").expect("registered");
         assert_ne!(p.fingerprint(1), p.fingerprint(2));
+        // Another build under the same name is another fingerprint: a run
+        // never mixes them.
+        let other = Programs::register(&["t=/bin/false".to_string()], t)
+            .await
+            .expect("/bin/false is a program");
+        let q = other.get("t").expect("registered");
+        assert_ne!(p.identity, q.identity);
+        assert_ne!(p.fingerprint(1), q.fingerprint(1));
     }
 }
