@@ -618,20 +618,54 @@ fn program_worker(port: u16, programs: &[(&str, &str)]) -> Proc {
     Proc::spawn_logged(&mut cmd, "worker")
 }
 
+/// A coordinator of experiments/test/program.toml (the `toy` program) in a
+/// new scratch directory; the directory, the run's and the coordinator.
+fn program_run(name: &str) -> (Scratch, PathBuf, Coordinator) {
+    let dir = scratch(name);
+    let exp = root().join("experiments/test/program.toml");
+    let out = dir.join("run");
+    let c = Coordinator::start(&exp, &out, 30.0);
+    (dir, out, c)
+}
+
 #[test]
 fn a_program_run_goes_only_to_workers_that_registered_its_program() {
-    let dir = scratch("program-farm");
-    let text = std::fs::read_to_string(root().join("experiments/test/program.toml")).unwrap();
-    let exp = dir.join("exp.toml");
-    std::fs::write(&exp, text).unwrap();
-    let out = dir.join("run");
-    let mut c = Coordinator::start(&exp, &out, 30.0);
+    let (_dir, out, mut c) = program_run("program-farm");
+    let watcher = naofarm()
+        .args(["watch", "toy", "--json", "--connect"])
+        .arg(format!("tcp/127.0.0.1:{}", c.port))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
     // One worker serves only another program; one serves the run's.
     let other = program_worker(c.port, &[("other", "toy")]);
     let other_id = worker_id(&other);
     let mut ws = vec![other, program_worker(c.port, &[("toy", "toy")])];
     let status = c.wait_exit();
     assert!(status.success(), "{:?}", c.seen);
+    // A watcher reads the program's run, its own parameter names and all.
+    let w = watcher.wait_with_output().unwrap();
+    let ev = events(&w.stdout);
+    let mut seen: Vec<u64> = ev
+        .history
+        .iter()
+        .chain(&ev.decided)
+        .map(|r| r["iteration"].as_u64().unwrap())
+        .collect();
+    seen.sort_unstable();
+    seen.dedup();
+    assert_eq!(
+        seen,
+        (0..6).collect::<Vec<u64>>(),
+        "{}",
+        String::from_utf8_lossy(&w.stderr)
+    );
+    assert!(ev
+        .decided
+        .iter()
+        .chain(&ev.history)
+        .all(|r| r["params"][0][0] == "a"));
     let log = plain(&ws[0].stderr());
     kill_all(&mut ws);
     assert!(
@@ -656,12 +690,7 @@ fn a_program_run_goes_only_to_workers_that_registered_its_program() {
 
 #[test]
 fn a_failing_program_s_trials_fail_with_its_reason_and_end_the_run() {
-    let dir = scratch("program-crash");
-    let text = std::fs::read_to_string(root().join("experiments/test/program.toml")).unwrap();
-    let exp = dir.join("exp.toml");
-    std::fs::write(&exp, text).unwrap();
-    let out = dir.join("run");
-    let mut c = Coordinator::start(&exp, &out, 30.0);
+    let (_dir, _out, mut c) = program_run("program-crash");
     // Registered as `toy`, but it crashes on every trial.
     let mut ws = vec![program_worker(c.port, &[("toy", "crash")])];
     let status = c.wait_exit();

@@ -221,22 +221,28 @@ fn chunk(field: &'static str, s: &str) -> Check {
     crate::keys::check_chunk(field, s).map_err(|m| (field, m))
 }
 
-fn program_param_list(field: &'static str, ps: &[(String, f64)]) -> Check {
-    if ps.len() > 64 {
-        return Err((field, format!("{} parameters, at most 64", ps.len())));
+/// A parameter of a run's result, of the registry (checked against its
+/// range) or of a program (any word, finite).
+fn any_value(name: &str, v: f64) -> Result<(), String> {
+    if crate::params::find(name).is_some() {
+        crate::params::check_value(name, v)
+    } else {
+        crate::params::check_program_value(name, v)
     }
-    for (name, v) in ps {
-        crate::params::check_program_value(name, *v).map_err(|m| (field, m))?;
-    }
-    Ok(())
 }
 
-fn param_list(field: &'static str, ps: &[(String, f64)]) -> Check {
+/// At most 64 parameters, each checked by `check` (the registry's, or a
+/// program's own names).
+fn param_list(
+    field: &'static str,
+    ps: &[(String, f64)],
+    check: fn(&str, f64) -> Result<(), String>,
+) -> Check {
     if ps.len() > 64 {
         return Err((field, format!("{} parameters, at most 64", ps.len())));
     }
     for (name, v) in ps {
-        crate::params::check_value(name, *v).map_err(|m| (field, m))?;
+        check(name, *v).map_err(|m| (field, m))?;
     }
     Ok(())
 }
@@ -295,9 +301,9 @@ impl WireMessage for TrialRequest {
         }
         self.physics.validate()?;
         if self.model == TrialModel::Program {
-            program_param_list("params", &self.params)
+            param_list("params", &self.params, crate::params::check_program_value)
         } else {
-            param_list("params", &self.params)
+            param_list("params", &self.params, crate::params::check_value)
         }
     }
 }
@@ -521,10 +527,10 @@ impl WireMessage for IterationResult {
     const KIND: u8 = 3;
     fn validate(&self) -> Check {
         chunk("run", &self.run)?;
-        param_list("params", &self.params)?;
+        param_list("params", &self.params, any_value)?;
         self.stats.check()?;
         if let Some(b) = &self.best {
-            param_list("best.params", &b.params)?;
+            param_list("best.params", &b.params, any_value)?;
             b.stats.check()?;
         }
         Ok(())
@@ -871,12 +877,12 @@ impl WireMessage for RunStatus {
         if self.accepts + self.equivalents + self.rejects != self.decided {
             return Err(("accepts", "decision counts do not add up to decided".into()));
         }
-        param_list("optim2", &self.optim2)?;
+        param_list("optim2", &self.optim2, any_value)?;
         if self.optim2_decided > self.decided {
             return Err(("optim2_decided", "more than decided".into()));
         }
         if let Some(b) = &self.best {
-            param_list("best.params", &b.params)?;
+            param_list("best.params", &b.params, any_value)?;
             b.stats.check()?;
         }
         reasons("failures", &self.failures)?;
