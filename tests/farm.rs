@@ -606,7 +606,13 @@ fn a_worker_that_joins_mid_run_gets_work() {
 
 /// A worker process serving the programs `NAME=PATH` (under tests/programs).
 fn program_worker(port: u16, programs: &[(&str, &str)]) -> Proc {
+    program_worker_with(port, programs, &[])
+}
+
+/// [`program_worker`] with variables set for its programs.
+fn program_worker_with(port: u16, programs: &[(&str, &str)], vars: &[(&str, &Path)]) -> Proc {
     let mut cmd = naofarm();
+    cmd.envs(vars.iter().copied());
     cmd.args(["worker", "--connect", &format!("tcp/127.0.0.1:{port}")])
         .args(["--slots", "2"])
         .env("RUST_LOG", "warn,naofarm_worker::service=debug")
@@ -704,6 +710,45 @@ fn a_failing_program_s_trials_fail_with_its_reason_and_end_the_run() {
         text.contains("program `toy` exited with status 3; standard error: crash: the simulator lost its licence server | crash: giving up"),
         "{text}"
     );
+}
+
+#[test]
+fn a_stopping_worker_stops_its_programs_and_what_they_started() {
+    let (dir, _out, _c) = program_run("program-stop");
+    let pid_file = dir.join("child.pid");
+    let mut w = program_worker_with(
+        _c.port,
+        &[("toy", "hang")],
+        &[("NAOFARM_TEST_PID_FILE", &pid_file)],
+    );
+    // The program has started its child and hangs (the time-out is 600 s).
+    let deadline = Instant::now() + TIMEOUT;
+    let child = loop {
+        if let Some(pid) = std::fs::read_to_string(&pid_file)
+            .ok()
+            .filter(|p| p.ends_with('\n'))
+        {
+            break pid.trim().to_string();
+        }
+        assert!(Instant::now() < deadline, "the program never started");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    signal(&w.child, "-TERM");
+    let status = w.child.wait().unwrap();
+    assert!(status.success(), "{status}: {}", w.stderr());
+    // The child is killed with the program's group: gone, or a zombie
+    // waiting for init.
+    let stat = Path::new("/proc").join(&child).join("stat");
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while std::fs::read_to_string(&stat).is_ok_and(|s| s.split_whitespace().nth(2) != Some("Z")) {
+        assert!(
+            Instant::now() < deadline,
+            "the program's child {child} outlived the stopped worker"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let log = plain(&w.stderr());
+    assert!(log.contains("worker stopped"), "{log}");
 }
 
 fn outcome_worker(r: &Record) -> Option<String> {

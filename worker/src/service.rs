@@ -355,7 +355,7 @@ pub async fn serve(
     let scratch = std::env::temp_dir().join(format!("naofarm-worker-{id}"));
     // Each run's program (from its adverts), and the slot each program trial holds.
     let mut run_program_of: BTreeMap<String, String> = BTreeMap::new();
-    let mut program_slots: BTreeMap<Held, u32> = BTreeMap::new();
+    let mut program_slots: BTreeMap<Held, (u32, tokio::task::JoinHandle<()>)> = BTreeMap::new();
     // The fingerprint this worker asks and answers `run` with.
     let fingerprint_for = |program: Option<&String>| {
         program
@@ -444,13 +444,13 @@ pub async fn serve(
                         let min_trial = cfg.min_trial;
                         if let Some(program) = req.program.as_ref().and_then(|p| cfg.programs.get(p)) {
                             // The lowest slot no program trial holds.
-                            let slot = (0..).find(|s| !program_slots.values().any(|u| u == s)).unwrap_or(0);
-                            program_slots.insert(key, slot);
+                            let slot = (0..).find(|s| !program_slots.values().any(|(u, _)| u == s)).unwrap_or(0);
                             let (program, dir, timeout) = (program.clone(), slot_dir(&scratch, slot), cfg.programs.timeout);
-                            tokio::spawn(async move {
+                            let task = tokio::spawn(async move {
                                 let (r, wall) = run_program(program, req.clone(), slot, dir, timeout).await;
                                 let _ = tx.send(Done::Trial(req, r, wall));
                             });
+                            program_slots.insert(key, (slot, task));
                             continue;
                         }
                         tokio::spawn(async move {
@@ -503,6 +503,7 @@ pub async fn serve(
                     spoke.insert(run.clone(), Instant::now());
                 }
                 spoke.retain(|r, _| held.keys().any(|(h, _, _)| h == r));
+                run_program_of.retain(|r, _| share.knows(r));
             }
             _ = tell.tick() => {
                 let mut runs: BTreeMap<String, u32> = BTreeMap::new();
@@ -584,6 +585,13 @@ pub async fn serve(
     }
     if let Err(e) = token.undeclare().await {
         tracing::warn!(error = %e, "undeclaring the liveliness token failed");
+    }
+    // Programs still running stop now, with every process they started
+    // (dropping a trial's task kills its process group), before their
+    // scratch space goes.
+    for (_, (_, task)) in std::mem::take(&mut program_slots) {
+        task.abort();
+        let _ = task.await;
     }
     // Only this worker ever wrote there (its id is in the name).
     if scratch.exists() {

@@ -294,6 +294,12 @@ impl Share {
         }
     }
 
+    /// Whether `run` is known (heard from and not forgotten).
+    #[must_use]
+    pub fn knows(&self, run: &str) -> bool {
+        self.runs.contains_key(run)
+    }
+
     /// Forgets runs not heard from for [`FORGET_AFTER`] that it holds nothing of.
     pub fn expire(&mut self, now: Instant) {
         self.runs.retain(|_, r| {

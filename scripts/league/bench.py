@@ -1,0 +1,163 @@
+#!/usr/bin/env python3
+"""Where a league trial's time goes, side by side in one run, on this machine:
+
+  1. the server's own sync-mode speed: one agent walking N walks of D s on
+     one server (UT's own optimisation loop), seconds per walk;
+  2. the trial program alone (scripts/league/league-trial): one walk per
+     start of the server and the agent, as the farm runs it, wall and CPU
+     seconds per trial (CPU of the program and everything it started);
+  3. the farm: `naofarm run` of experiments/league.toml cut to a few
+     iterations, with W local workers (one slot each): trials per second,
+     and per core.
+
+  scripts/league/bench.py PROGRAM [--naofarm BIN] [--walks N] [--trials N]
+      [--iterations N] [--workers W]
+
+PROGRAM is the league build's trial program (the last line build.sh prints).
+"""
+
+import argparse
+import json
+import os
+import resource
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+
+HERE = os.path.dirname(os.path.realpath(__file__))
+ROOT = os.path.dirname(os.path.dirname(HERE))
+
+
+def children_cpu():
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def trial_input(scratch, duration, params=None):
+    return json.dumps({
+        "run": "bench", "iteration": 0, "trial": 0, "seed": 1,
+        "duration_s": duration, "robot_type": 0, "params": params or {},
+        "slot": 0, "scratch": scratch,
+    })
+
+
+def server_walks(program, walks, duration):
+    """One server, one agent walking `walks` walks in UT's own loop
+    (`naofarm_walks`): the server's speed without a start per walk."""
+    prefix = os.path.dirname(os.path.dirname(os.path.realpath(program)))
+    agent_dir = os.path.join(prefix, "agent")
+    with tempfile.TemporaryDirectory() as scratch:
+        libs = [os.path.join(prefix, "lib", d) for d in ("simspark", "rcssserver3d")]
+        env = dict(os.environ, HOME=scratch, LD_LIBRARY_PATH=":".join(libs))
+        socks = [socket.socket() for _ in range(2)]
+        for s in socks:
+            s.bind(("127.0.0.1", 0))
+        ports = [s.getsockname()[1] for s in socks]
+        for s in socks:
+            s.close()
+        server = subprocess.Popen(
+            [os.path.join(prefix, "bin", "rcssserver3d"), "--agent-port", str(ports[0]),
+             "--server-port", str(ports[1])],
+            cwd=scratch, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            deadline = time.monotonic() + 30
+            while time.monotonic() < deadline:
+                with open("/proc/net/tcp", encoding="ascii") as f:
+                    up = {int(l.split()[1].rsplit(":", 1)[1], 16) for l in f.readlines()[1:]
+                          if l.split()[3] == "0A"}
+                if set(ports) <= up:
+                    break
+                time.sleep(0.02)
+            params = os.path.join(scratch, "p.txt")
+            with open(params, "w", encoding="utf-8") as f:
+                f.write(f"naofarm_walks\t{walks}\nnaofarm_walk_time\t{duration}\n")
+            t0 = time.monotonic()
+            agent = subprocess.Popen(
+                [os.path.join(agent_dir, "agentspark"), "--unum", "2", "--type", "0",
+                 "--paramsfile", "paramfiles/defaultParams.txt",
+                 "--paramsfile", "paramfiles/defaultParams_t0.txt",
+                 "--paramsfile", params, "--experimentout", os.path.join(scratch, "out.txt"),
+                 "--optimize", "walkForwardAgent", "--port", str(ports[0]),
+                 "--mport", str(ports[1])],
+                cwd=agent_dir, env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                text=True)
+            stamps = []
+            for line in agent.stdout:
+                if line.startswith("naofarm-walk "):
+                    stamps.append(time.monotonic())
+                    if len(stamps) == walks:
+                        break
+            agent.kill()
+            agent.wait()
+        finally:
+            server.send_signal(2)
+            try:
+                server.wait(timeout=2)
+            except subprocess.TimeoutExpired:
+                server.kill()
+                server.wait()
+    first = stamps[0] - t0
+    per_walk = (stamps[-1] - stamps[0]) / (len(stamps) - 1)
+    return first, per_walk
+
+
+def program_trials(program, trials, duration):
+    walls, cpus = [], []
+    with tempfile.TemporaryDirectory() as scratch:
+        for _ in range(trials):
+            c0, t0 = children_cpu(), time.monotonic()
+            out = subprocess.run([program], input=trial_input(scratch, duration), text=True,
+                                 capture_output=True, check=True)
+            walls.append(time.monotonic() - t0)
+            cpus.append(children_cpu() - c0)
+            json.loads(out.stdout.strip().splitlines()[-1])
+    return sum(walls) / trials, sum(cpus) / trials
+
+
+def farm(naofarm, program, iterations, workers):
+    with tempfile.TemporaryDirectory() as d:
+        exp = os.path.join(d, "league.toml")
+        with open(os.path.join(ROOT, "experiments", "league.toml"), encoding="utf-8") as f:
+            text = f.read().replace("iterations = 150", f"iterations = {iterations}")
+        with open(exp, "w", encoding="utf-8") as f:
+            f.write(text)
+        c0, t0 = children_cpu(), time.monotonic()
+        out = subprocess.run(
+            [naofarm, "run", exp, "--out", os.path.join(d, "run"), "--json",
+             "--workers", str(workers), "--program", f"league={program}"],
+            capture_output=True, text=True, check=True)
+        wall, cpu = time.monotonic() - t0, children_cpu() - c0
+    trials = sum(1 for l in out.stdout.splitlines() if l.startswith('{"event":"decided"')) * 10
+    return trials, wall, cpu
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("program")
+    ap.add_argument("--naofarm", default=os.path.join(ROOT, "target", "release", "naofarm"))
+    ap.add_argument("--walks", type=int, default=10)
+    ap.add_argument("--trials", type=int, default=10)
+    ap.add_argument("--iterations", type=int, default=6)
+    ap.add_argument("--workers", type=int, default=2)
+    a = ap.parse_args()
+    duration = 10.0
+    first, per_walk = server_walks(a.program, a.walks, duration)
+    wall, cpu = program_trials(a.program, a.trials, duration)
+    n, fwall, fcpu = farm(a.naofarm, a.program, a.iterations, a.workers)
+    cores = os.cpu_count() or 1
+    print(f"server's own sync mode: {per_walk:.2f} s per {duration:.0f}-s walk "
+          f"({duration / per_walk:.1f}x real time); the first walk after the agent "
+          f"starts {first:.2f} s (with UT's 3-s settle)")
+    print(f"trial program alone:    {wall:.2f} s wall, {cpu:.2f} s CPU per trial "
+          f"({wall / per_walk:.2f}x a walk in the server's loop)")
+    print(f"farm, {a.workers} workers:        {n} trials in {fwall:.1f} s: "
+          f"{n / fwall:.3f} trials/s, {n / fwall / min(a.workers, cores):.3f} per core; "
+          f"{fcpu / n:.2f} s CPU per trial (coordinator, workers and programs)")
+    print(f"farm overhead:          {a.workers / (n / fwall) - wall:.2f} s wall per trial per "
+          f"slot beyond the program's ({(a.workers / (n / fwall)) / wall:.3f}x)")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
