@@ -818,6 +818,9 @@ fn conforms(
             "integer" => value.is_u64(),
             "number" => value.is_number(),
             "boolean" => value.is_boolean(),
+            "strings" => value
+                .as_array()
+                .is_some_and(|a| a.iter().all(serde_json::Value::is_string)),
             "reasons" => value.as_array().is_some_and(|a| {
                 a.iter().all(|p| {
                     p.as_array()

@@ -937,6 +937,9 @@ pub struct WorkerStatus {
     pub trials: u64,
     /// Trials it failed or gave back since it started.
     pub refused: u64,
+    /// The trial programs it registered, by name.
+    #[serde(default)]
+    pub programs: Vec<String>,
 }
 
 impl WireMessage for WorkerStatus {
@@ -969,6 +972,12 @@ impl WireMessage for WorkerStatus {
         }
         if self.runs.iter().map(|(_, n)| u64::from(*n)).sum::<u64>() > u64::from(self.busy) {
             return Err(("runs", "more trials held than busy slots".into()));
+        }
+        if self.programs.len() > 64 {
+            return Err(("programs", "more than 64 programs".into()));
+        }
+        for p in &self.programs {
+            crate::experiment::check_program_name(p).map_err(|m| ("programs", m))?;
         }
         Ok(())
     }

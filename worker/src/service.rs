@@ -520,6 +520,7 @@ pub async fn serve(
                     runs: runs.into_iter().collect(),
                     trials: summary.trials,
                     refused: summary.refused,
+                    programs: cfg.programs.by_name.keys().cloned().collect(),
                 };
                 put_status(&session, &status_key, &st).await;
             }

@@ -248,6 +248,7 @@ impl Fleet {
                     "runs": names,
                     "trials": s.trials,
                     "refused": s.refused,
+                    "programs": s.programs,
                     "heard_s_ago": now.saturating_duration_since(w.heard).as_secs_f64(),
                 })
             })
@@ -307,6 +308,7 @@ mod tests {
             runs: runs.iter().map(|(r, n)| ((*r).to_string(), *n)).collect(),
             trials: 3,
             refused: 0,
+            programs: vec![],
         }
     }
 

@@ -37,6 +37,7 @@ function fleetPage(f) {
   const workers = f.workers.map(w => `<tr data-worker="${esc(w.worker)}">
       <td class="l muted">${esc(w.worker.slice(0, 8))}</td><td class="l">${esc(w.host)}</td>
       <td>${w.busy} / ${w.slots}</td><td class="l muted">${esc(w.fingerprint)}</td>
+      <td class="l">${w.programs.map(esc).join(", ") || "–"}</td>
       <td class="l">${w.runs.map(r => esc(r.run) + " (" + r.held + ")").join(", ") || "–"}</td>
       <td>${w.trials}</td><td>${w.refused}</td><td>${num(w.heard_s_ago, 1)} s</td></tr>`).join("");
   main.innerHTML = banner + `
@@ -47,9 +48,9 @@ function fleetPage(f) {
       <tbody>${runs || '<tr><td class="l muted" colspan="12">no run answers</td></tr>'}</tbody></table>
     <h2>Workers</h2>
     <table id="workers"><thead><tr><th class="l">worker</th><th class="l">host</th><th>busy</th>
-      <th class="l">fingerprint</th><th class="l">serving</th><th>trials</th><th>failed</th>
-      <th>last heard</th></tr></thead>
-      <tbody>${workers || '<tr><td class="l muted" colspan="8">no worker answers</td></tr>'}</tbody></table>`;
+      <th class="l">fingerprint</th><th class="l">programs</th><th class="l">serving</th><th>trials</th>
+      <th>failed</th><th>last heard</th></tr></thead>
+      <tbody>${workers || '<tr><td class="l muted" colspan="9">no worker answers</td></tr>'}</tbody></table>`;
 }
 
 function fleetLineText(f) {
