@@ -63,6 +63,12 @@ fn a_good_program_answers_with_its_measurement_from_its_seed() {
 }
 
 #[test]
+fn a_program_may_log_as_much_as_it_likes_before_its_measurement() {
+    let m = trial("chatty", Duration::from_secs(30)).unwrap();
+    assert_eq!((m.x_m, m.fell), (1.25, false));
+}
+
+#[test]
 fn a_hanging_program_is_killed_with_every_process_it_started() {
     let dir = scratch("program-hang-pid");
     let pid_file = dir.join("child.pid");

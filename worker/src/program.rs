@@ -28,8 +28,8 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
 /// How long `PROGRAM --version` may take when the worker registers it.
 const VERSION_WITHIN: Duration = Duration::from_secs(10);
-/// Most bytes of a program's standard output read (the measurement is its last line).
-const MOST_STDOUT: usize = 1 << 20;
+/// Bytes of a program's standard output kept (the measurement is its last line).
+const STDOUT_TAIL: usize = 64 << 10;
 /// Bytes of a program's standard error kept for a failure's reason.
 const STDERR_TAIL: usize = 600;
 /// How long the pipes may stay open once the program's group is killed (a
@@ -247,6 +247,24 @@ fn kill_group(pgid: Option<u32>) {
     }
 }
 
+/// Reads a pipe to its end, keeping its last `keep` bytes or a little more
+/// (a program may write as much as it likes: it is never left blocked on a
+/// full pipe).
+async fn read_tail(pipe: &mut (impl tokio::io::AsyncRead + Unpin), keep: usize) -> Vec<u8> {
+    let mut buf = Vec::new();
+    let mut chunk = [0u8; 8192];
+    while let Ok(n) = pipe.read(&mut chunk).await {
+        if n == 0 {
+            break;
+        }
+        buf.extend_from_slice(&chunk[..n]);
+        if buf.len() > 2 * keep {
+            buf.drain(..buf.len() - keep);
+        }
+    }
+    buf
+}
+
 /// The last `STDERR_TAIL` bytes of `err`, as text on one line.
 fn tail(err: &[u8]) -> String {
     let text = String::from_utf8_lossy(err);
@@ -334,28 +352,8 @@ pub async fn run(
         let _ = stdin.write_all(&input).await;
         let _ = stdin.shutdown().await;
     });
-    let read_out = tokio::spawn(async move {
-        let mut buf = Vec::new();
-        let _ = (&mut stdout)
-            .take(MOST_STDOUT as u64)
-            .read_to_end(&mut buf)
-            .await;
-        buf
-    });
-    let read_err = tokio::spawn(async move {
-        let mut buf = Vec::new();
-        let mut chunk = [0u8; 4096];
-        while let Ok(n) = stderr.read(&mut chunk).await {
-            if n == 0 {
-                break;
-            }
-            buf.extend_from_slice(&chunk[..n]);
-            if buf.len() > 4 * STDERR_TAIL {
-                buf.drain(..buf.len() - 2 * STDERR_TAIL);
-            }
-        }
-        buf
-    });
+    let read_out = tokio::spawn(async move { read_tail(&mut stdout, STDOUT_TAIL).await });
+    let read_err = tokio::spawn(async move { read_tail(&mut stderr, 2 * STDERR_TAIL).await });
     let ended = tokio::time::timeout(timeout, child.wait()).await;
     // Whatever it started and left running goes with it (and with them
     // the last ends of its pipes).
