@@ -604,6 +604,17 @@ fn a_worker_that_joins_mid_run_gets_work() {
     );
 }
 
+/// `naofarm watch NAME --json` of the coordinator on `port`, its output piped.
+fn watch(name: &str, port: u16) -> Child {
+    naofarm()
+        .args(["watch", name, "--json", "--connect"])
+        .arg(format!("tcp/127.0.0.1:{port}"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
 /// A worker process serving the programs `NAME=PATH` (under tests/programs).
 fn program_worker(port: u16, programs: &[(&str, &str)]) -> Proc {
     program_worker_with(port, programs, &[])
@@ -637,13 +648,7 @@ fn program_run(name: &str) -> (Scratch, PathBuf, Coordinator) {
 #[test]
 fn a_program_run_goes_only_to_workers_that_registered_its_program() {
     let (_dir, out, mut c) = program_run("program-farm");
-    let watcher = naofarm()
-        .args(["watch", "toy", "--json", "--connect"])
-        .arg(format!("tcp/127.0.0.1:{}", c.port))
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let watcher = watch("toy", c.port);
     // One worker serves only another program; one serves the run's.
     let other = program_worker(c.port, &[("other", "toy")]);
     let other_id = worker_id(&other);
@@ -992,13 +997,7 @@ fn a_long_history_reaches_a_late_watcher_whole() {
     );
     // Extended to 400 iterations and served with no worker: it stays up.
     let c = Coordinator::start(&exp, &out, 30.0);
-    let mut watcher = naofarm()
-        .args(["watch", "farm", "--json", "--connect"])
-        .arg(format!("tcp/127.0.0.1:{}", c.port))
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
+    let mut watcher = watch("farm", c.port);
     let (tx, rx) = mpsc::channel();
     let stdout = watcher.stdout.take().unwrap();
     std::thread::spawn(move || {
@@ -1036,13 +1035,7 @@ fn a_late_watcher_gets_the_history_then_every_later_iteration_once() {
     let port = c.port;
     let mut ws = vec![worker(port, 2, 40)];
     c.wait_decided(4);
-    let watcher = naofarm()
-        .args(["watch", "farm", "--json", "--connect"])
-        .arg(format!("tcp/127.0.0.1:{port}"))
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let watcher = watch("farm", port);
     let status = c.wait_exit();
     kill_all(&mut ws);
     assert!(status.success());

@@ -130,12 +130,20 @@ fn a_league_run_on_the_real_server_is_journaled_killed_and_resumed() {
             break;
         }
     }
-    // Its trials in flight: the programs, their servers and agents.
-    let in_flight = descendants(first.id());
-    assert!(
-        in_flight.iter().any(|(_, n)| n == "rcssserver3d"),
-        "trials were in flight: {in_flight:?}"
-    );
+    // Its trials in flight: the programs, their servers and agents (the
+    // pipeline keeps trials going; wait until a server runs).
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let in_flight = loop {
+        let d = descendants(first.id());
+        if d.iter().any(|(_, n)| n == "rcssserver3d") {
+            break d;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "no server started after the first decision: {d:?}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
     first.kill().unwrap();
     first.wait().unwrap();
     assert_eq!(decided.len(), 1, "the first run decided an iteration");
