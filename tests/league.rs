@@ -11,7 +11,7 @@ use std::{
     io::{BufRead, BufReader},
     path::{Path, PathBuf},
     process::{Command, Stdio},
-    time::{Duration, Instant},
+    time::Duration,
 };
 
 use coordinator::journal::{Journal, Record};
@@ -132,18 +132,15 @@ fn a_league_run_on_the_real_server_is_journaled_killed_and_resumed() {
     }
     // Its trials in flight: the programs, their servers and agents (the
     // pipeline keeps trials going; wait until a server runs).
-    let deadline = Instant::now() + Duration::from_secs(60);
-    let in_flight = loop {
-        let d = descendants(first.id());
-        if d.iter().any(|(_, n)| n == "rcssserver3d") {
-            break d;
-        }
-        assert!(
-            Instant::now() < deadline,
-            "no server started after the first decision: {d:?}"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    };
+    let pid = first.id();
+    let in_flight = util::wait_for(
+        "a server among the run's trials",
+        Duration::from_secs(60),
+        || {
+            let d = descendants(pid);
+            d.iter().any(|(_, n)| n == "rcssserver3d").then_some(d)
+        },
+    );
     first.kill().unwrap();
     first.wait().unwrap();
     assert_eq!(decided.len(), 1, "the first run decided an iteration");
@@ -152,20 +149,17 @@ fn a_league_run_on_the_real_server_is_journaled_killed_and_resumed() {
     assert_eq!(stats["s"], 1.0, "{stats}");
     assert!(stats["mx"].as_f64().unwrap() > 1.0, "{stats}");
     // The killed run's programs, servers and agents do not outlive it.
-    let deadline = Instant::now() + Duration::from_secs(20);
-    loop {
-        let live: Vec<u32> = processes().iter().map(|(p, _, _)| *p).collect();
-        let left: Vec<&(u32, String)> =
-            in_flight.iter().filter(|(p, _)| live.contains(p)).collect();
-        if left.is_empty() {
-            break;
-        }
-        assert!(
-            Instant::now() < deadline,
-            "the killed run's trials live on: {left:?}"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    util::wait_for(
+        &format!("the killed run's trials {in_flight:?} to end"),
+        Duration::from_secs(20),
+        || {
+            let live: Vec<u32> = processes().iter().map(|(p, _, _)| *p).collect();
+            in_flight
+                .iter()
+                .all(|(p, _)| !live.contains(p))
+                .then_some(())
+        },
+    );
 
     // Resumed: the same directory, the same command.
     succeed(&mut run(&exp, &out, &program));

@@ -251,3 +251,24 @@ pub fn decided(
 pub fn bits(h: &[coordinator::evolve::DecidedIteration]) -> Vec<u64> {
     coordinator::evolve::history_bits(h)
 }
+
+/// Waits until `cond` gives a value (polled every 10 ms, the one polling
+/// interval of the tests' event waits), failing with `what` after `within`.
+#[allow(dead_code)]
+pub fn wait_for<T>(
+    what: &str,
+    within: std::time::Duration,
+    mut cond: impl FnMut() -> Option<T>,
+) -> T {
+    let deadline = std::time::Instant::now() + within;
+    loop {
+        if let Some(v) = cond() {
+            return v;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "waited {within:?} for {what}"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+}
