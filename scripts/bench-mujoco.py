@@ -6,10 +6,12 @@ bench/mujoco-nao/bench.c against the headers and library in its wheel, and
 runs, in interleaved pairs on one core each: MuJoCo's closed C loop on the
 same NAO (bench/mujoco-nao/nao.xml, 5 ms steps, discrete integrator,
 Newton, the stepping motion of bench.c) and `naofarm bench sim` (the shipped
-physics, 4 x 5 ms, walking the expert set). Prints each pair's physics steps
-per CPU second and their ratio, then the median ratio.
+physics, 4 x 5 ms, walking the expert set; the median of 3 rounds). Prints
+each pair's physics steps per CPU second and their ratio, then the median
+ratio. Given `--naofarm` more than once (builds to compare, say before and
+after a change), each pair runs every build beside the same MuJoCo runs.
 
-    scripts/bench-mujoco.py [--pairs 5] [--venv DIR] [--naofarm target/release/naofarm]
+    scripts/bench-mujoco.py [--pairs 5] [--venv DIR] [--naofarm target/release/naofarm ...]
 """
 import argparse
 import os
@@ -51,8 +53,8 @@ def mujoco_steps(exe: pathlib.Path) -> float:
 
 
 def naofarm_steps(binary: str) -> float:
-    """naofarm's shipped walk's physics steps per CPU second (one round of `bench sim`)."""
-    out = subprocess.run([binary, "bench", "sim", "--rounds", "1", "--seconds", "10", "--json"],
+    """naofarm's shipped walk's physics steps per CPU second (the median of 3 rounds of `bench sim`)."""
+    out = subprocess.run([binary, "bench", "sim", "--rounds", "3", "--seconds", "10", "--json"],
                          capture_output=True, text=True, check=True).stdout
     return float(json.loads(out)["steps_per_second"])
 
@@ -61,21 +63,33 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--pairs", type=int, default=5)
     ap.add_argument("--venv", default=os.path.join(os.path.expanduser("~"), ".cache", "naofarm", "mujoco-venv"))
-    ap.add_argument("--naofarm", default=str(ROOT / "target" / "release" / "naofarm"))
+    ap.add_argument("--naofarm", action="append",
+                    help="a naofarm binary (repeatable; default target/release/naofarm)")
     a = ap.parse_args()
     if not 1 <= a.pairs <= 100:
         sys.exit("--pairs must be in 1..=100")
+    binaries = a.naofarm or [str(ROOT / "target" / "release" / "naofarm")]
     exe = mujoco_bench(pathlib.Path(a.venv))
-    if not os.path.exists(a.naofarm):
-        subprocess.run(["cargo", "build", "--release", "--quiet"], cwd=ROOT, check=True)
-    print("pair  naofarm steps/s  MuJoCo steps/s  naofarm / MuJoCo")
-    ratios = []
+    for binary in binaries:
+        if not os.path.exists(binary):
+            if binary != str(ROOT / "target" / "release" / "naofarm"):
+                sys.exit(f"no naofarm binary at {binary}")
+            subprocess.run(["cargo", "build", "--release", "--quiet"], cwd=ROOT, check=True)
+    for i, binary in enumerate(binaries):
+        print(f"naofarm {i + 1}: {binary}")
+    print("pair  " + "  ".join(f"naofarm {i + 1} steps/s" for i in range(len(binaries)))
+          + "  MuJoCo steps/s  " + "  ".join(f"{i + 1} / MuJoCo" for i in range(len(binaries))))
+    ratios = [[] for _ in binaries]
     for k in range(a.pairs):
-        ours, theirs = naofarm_steps(a.naofarm), mujoco_steps(exe)
-        ratios.append(ours / theirs)
-        print(f"{k + 1:4d}  {ours:15.0f}  {theirs:14.0f}  {ours / theirs:16.2f}")
-    print(f"median over {a.pairs} pairs: {statistics.median(ratios):.2f} x MuJoCo's physics steps per second")
-
+        ours = [naofarm_steps(b) for b in binaries]
+        theirs = mujoco_steps(exe)
+        for r, o in zip(ratios, ours):
+            r.append(o / theirs)
+        print(f"{k + 1:4d}  " + "  ".join(f"{o:17.0f}" for o in ours) + f"  {theirs:14.0f}  "
+              + "  ".join(f"{o / theirs:11.2f}" for o in ours))
+    for i, r in enumerate(ratios):
+        print(f"naofarm {i + 1}, median over {a.pairs} pairs: {statistics.median(r):.2f} x MuJoCo's "
+              "physics steps per second")
 
 if __name__ == "__main__":
     main()

@@ -1,7 +1,8 @@
 //! The vendored rapier3d's own changes beyond the release's (vendor/rapier3d/
 //! NAOFARM.md): what the release left as stubs now works. naofarm's NAO
-//! uses hinges only, so these paths are checked here on their own; and the
-//! slice kernels that do nalgebra's arithmetic faster give its bits.
+//! uses hinges only, so these paths are checked here on their own; the
+//! slice kernels that do nalgebra's arithmetic faster give its bits; the
+//! tree's factorisation solves as the dense inverse does.
 
 use rapier3d::math::Vector;
 use rapier3d::prelude::*;
@@ -199,4 +200,64 @@ fn the_slice_kernels_give_nalgebras_bits() {
     assert!(!singular.solve_upper_triangular_mut(&mut theirs));
     assert!(!solve_upper(&singular, ours.as_mut_slice()));
     assert_eq!(bits(ours.as_slice()), bits(theirs.as_slice()));
+}
+
+use rapier3d::utils::tree_ldl::{TreeLdl, NO_PARENT};
+
+/// A random symmetric positive-definite matrix with the pattern of the tree
+/// `parents`: `I + Σ_k J_k J_kᵀ`, each `J_k` nonzero on `k`'s chain only.
+fn tree_matrix(parents: &[usize], seed: u32) -> nalgebra::DMatrix<f32> {
+    let n = parents.len();
+    let mut s = seed;
+    let mut next = || {
+        s = s.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        (s >> 8) as f32 / (1u32 << 24) as f32 - 0.5
+    };
+    let mut h = nalgebra::DMatrix::identity(n, n);
+    for k in 0..n {
+        let mut j = nalgebra::DVector::zeros(n);
+        let mut i = k;
+        while i != NO_PARENT {
+            j[i] = next();
+            i = parents[i];
+        }
+        h += &j * j.transpose();
+    }
+    h
+}
+
+#[test]
+fn the_trees_factorisation_solves_as_the_dense_inverse_does() {
+    // A free root (6 in a row), two branches off its end, a fork off the
+    // first branch's end and a second child of its middle.
+    let parents = [NO_PARENT, 0, 1, 2, 3, 4, 5, 6, 7, 5, 9, 10, 11, 8, 13, 7];
+    for seed in 0..5 {
+        let h = tree_matrix(&parents, seed);
+        // Entries off the pattern are zero; the factorisation never reads them.
+        assert_eq!(h[(8, 9)], 0.0);
+        let ldl = TreeLdl::factor(&h, &parents).expect("positive definite");
+        assert_eq!(ldl.dim(), parents.len());
+        let inv = h.clone().try_inverse().expect("invertible");
+        for k in 0..parents.len() {
+            let mut x = vec![0.0; parents.len()];
+            x[k] = 1.0;
+            x[(k + 3) % parents.len()] = -0.5;
+            ldl.solve(&mut x);
+            for (i, xi) in x.iter().enumerate() {
+                let want = inv[(i, k)] - 0.5 * inv[(i, (k + 3) % parents.len())];
+                assert!(
+                    (xi - want).abs() < 1.0e-4,
+                    "seed {seed}, rhs {k}, row {i}: {xi} vs {want}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn the_trees_factorisation_refuses_a_matrix_that_is_not_positive_definite() {
+    let h = nalgebra::DMatrix::from_row_slice(2, 2, &[1.0, 2.0, 2.0, 1.0]);
+    assert!(TreeLdl::factor(&h, &[NO_PARENT, 0]).is_none());
+    let h = nalgebra::DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, f32::NAN]);
+    assert!(TreeLdl::factor(&h, &[NO_PARENT, 0]).is_none());
 }

@@ -378,6 +378,9 @@ impl Sim {
         let firm_toes = model.joints.iter().any(|j| is_toe(&j.name));
         let firm = settings.firm_stops || firm_toes;
         world.integration_parameters.speculative_joint_limits = firm;
+        // No continuous collision detection: the ground is a metre thick and
+        // no body comes near the speed that would cross it within a step.
+        world.integration_parameters.max_ccd_substeps = 0;
         world.integration_parameters.joint_limits_after_contacts = if firm {
             FIRM_STOP_RESOLVE_PAST_DEG.to_radians() as f32
         } else {

@@ -22,6 +22,8 @@ mod scalar_type;
 mod simd_real_copy;
 #[cfg(feature = "alloc")]
 pub mod slice_blas;
+#[cfg(feature = "alloc")]
+pub mod tree_ldl;
 mod simd_select;
 
 pub use component_mul::ComponentMul;

@@ -14,6 +14,7 @@ use crate::prelude::MultibodyJoint;
 #[cfg(feature = "dim3")]
 use crate::utils::mat_to_na;
 use crate::utils::slice_blas::lu_solve;
+use crate::utils::tree_ldl::{MassInverse, NO_PARENT};
 use crate::utils::{AngularInertiaOps, CrossProduct, CrossProductMatrix, IndexMut2, vect_to_na};
 use na::{
     self, DMatrix, DVectorView, DVectorViewMut, Dyn, LU, OMatrix, SMatrix, SVector, StorageMut,
@@ -86,6 +87,36 @@ fn sparse_quadform(
     }
 }
 
+/// naofarm's patch: `out += rhsᵀ · diag(m, I) · rhs` on the lower triangle
+/// of `out` only, where `rhs` is zero outside the columns `ranges` (the
+/// 6×6 block's linear part is diagonal: a column costs 12 multiplications,
+/// not 36).
+#[cfg(feature = "dim3")]
+fn sparse_mass_quadform_lower(
+    out: &mut DMatrix<Real>,
+    mass: &na::Vector3<Real>,
+    inertia: &na::Matrix3<Real>,
+    rhs: &Jacobian<Real>,
+    ranges: &[(usize, usize)],
+) {
+    let n = out.nrows();
+    for &(cs, cl) in ranges {
+        for j in cs..cs + cl {
+            let col = rhs.column(j);
+            let lin = col.fixed_rows::<DIM>(0).component_mul(mass);
+            let ang = inertia * col.fixed_rows::<ANG_DIM>(DIM);
+            let out_j = &mut out.as_mut_slice()[j * n..(j + 1) * n];
+            for &(rs, rl) in ranges {
+                for r in rs.max(j)..rs + rl {
+                    let c = rhs.column(r);
+                    out_j[r] += c.fixed_rows::<DIM>(0).dot(&lin)
+                        + c.fixed_rows::<ANG_DIM>(DIM).dot(&ang);
+                }
+            }
+        }
+    }
+}
+
 #[cfg(feature = "dim3")]
 fn concat_rb_mass_matrix(
     mass: Vector,
@@ -152,7 +183,10 @@ pub struct Multibody {
     //       move dofs from/to a format that matches the augmented mass.
     // TODO: use sparse matrices?
     augmented_mass: DMatrix<Real>,
-    inv_augmented_mass: LU<Real, Dyn, Dyn>,
+    // naofarm's patch: factored on the tree's pattern (`utils::tree_ldl`),
+    // each kept degree of freedom's parent in `dof_parents`.
+    inv_augmented_mass: MassInverse,
+    dof_parents: Vec<usize>,
     // The indexing sequence for moving all kinematics degrees of
     // freedoms to the end of the generalized coordinates vector.
     augmented_mass_indices: IndexSequence,
@@ -200,7 +234,8 @@ impl Multibody {
             body_jacobians: Vec::new(),
             link_chains: Vec::new(),
             augmented_mass: DMatrix::zeros(0, 0),
-            inv_augmented_mass: LU::new(DMatrix::zeros(0, 0)),
+            inv_augmented_mass: MassInverse::default(),
+            dof_parents: Vec::new(),
             acc_augmented_mass: DMatrix::zeros(0, 0),
             acc_inv_augmented_mass: LU::new(DMatrix::zeros(0, 0)),
             augmented_mass_indices: IndexSequence::new(),
@@ -406,7 +441,7 @@ impl Multibody {
     }
 
     /// The inverse augmented mass matrix of this multibody.
-    pub fn inv_augmented_mass(&self) -> &LU<Real, Dyn, Dyn> {
+    pub fn inv_augmented_mass(&self) -> &MassInverse {
         &self.inv_augmented_mass
     }
 
@@ -759,7 +794,7 @@ impl Multibody {
                 self.augmented_mass_indices.with_rearranged_rows_mut(
                     &mut self.accelerations,
                     |accs| {
-                        lu_solve(&self.inv_augmented_mass, accs.as_mut_slice());
+                        self.inv_augmented_mass.solve(accs.as_mut_slice());
                     },
                 );
 
@@ -832,6 +867,30 @@ impl Multibody {
                     _ => chain.push((start, n)),
                 }
             }
+        }
+    }
+
+    /// naofarm's patch: each kept (non-kinematic) degree of freedom's
+    /// parent, numbered as the rearranged mass matrix numbers them (kept
+    /// ones first, in order): the previous one of its joint, else the last
+    /// kept one of its nearest ancestor's, else none.
+    fn update_dof_parents(&mut self) {
+        let parents = &mut self.dof_parents;
+        parents.clear();
+        let mut last = Vec::with_capacity(self.links.len());
+        for (i, link) in self.links.iter().enumerate() {
+            let mut up = if i == 0 {
+                NO_PARENT
+            } else {
+                last[link.parent_internal_id]
+            };
+            if !link.joint.kinematic {
+                for _ in 0..link.joint.ndofs() {
+                    parents.push(up);
+                    up = parents.len() - 1;
+                }
+            }
+            last.push(up);
         }
     }
 
@@ -979,11 +1038,20 @@ impl Multibody {
 
             // TODO: optimize that (knowing the structure of the augmented inertia matrix).
             // TODO: this could be better optimized in 2D.
-            #[allow(clippy::useless_conversion)] // Needed in 3D, no-op in 2D
-            let rb_mass_matrix_wo_gyro = concat_rb_mass_matrix(rb_mass, rb_inertia.into());
+            #[cfg(feature = "dim2")]
+            let rb_mass_matrix_wo_gyro = concat_rb_mass_matrix(rb_mass, rb_inertia);
             #[allow(clippy::useless_conversion)] // Needed in 3D, no-op in 2D
             let rb_mass_matrix = concat_rb_mass_matrix(rb_mass, augmented_inertia.into());
             let chain = chains[i].as_slice();
+            #[cfg(feature = "dim3")]
+            sparse_mass_quadform_lower(
+                &mut self.augmented_mass,
+                &vect_to_na(rb_mass),
+                &mat_to_na(rb_inertia),
+                body_jacobian,
+                chain,
+            );
+            #[cfg(feature = "dim2")]
             sparse_quadform(
                 &mut self.augmented_mass,
                 &rb_mass_matrix_wo_gyro,
@@ -1190,6 +1258,10 @@ impl Multibody {
             }
         }
 
+        // The symmetric mass matrix was formed on its lower triangle.
+        #[cfg(feature = "dim3")]
+        self.augmented_mass.fill_upper_triangle_with_lower_triangle();
+
         let effective_dim = self
             .augmented_mass_indices
             .dim_after_removal(self.acc_augmented_mass.nrows());
@@ -1209,7 +1281,10 @@ impl Multibody {
         // TODO: avoid allocation inside LU at each timestep.
         self.acc_inv_augmented_mass =
             LU::new(leading_block(&self.acc_augmented_mass, effective_dim));
-        self.inv_augmented_mass = LU::new(leading_block(&self.augmented_mass, effective_dim));
+        self.update_dof_parents();
+        debug_assert_eq!(self.dof_parents.len(), effective_dim);
+        self.inv_augmented_mass
+            .update(&self.augmented_mass, &self.dof_parents);
     }
 
     /// Per-DoF inverse joint-space inertia `diag(M⁻¹)` at the current configuration, where `M`
@@ -1238,7 +1313,7 @@ impl Multibody {
             e[i] = 1.0;
             self.augmented_mass_indices
                 .with_rearranged_rows_mut(&mut e, |b| {
-                    self.inv_augmented_mass.solve_mut(b);
+                    self.inv_augmented_mass.solve(b.as_mut_slice());
                 });
             out[i] = e[i];
         }
@@ -1328,10 +1403,8 @@ impl Multibody {
             for k in 0..ndofs {
                 jacobians[j_id + ndofs + k] = jacobians[j_id + k];
             }
-            lu_solve(
-                &self.inv_augmented_mass,
-                &mut jacobians.as_mut_slice()[j_id + ndofs..j_id + 2 * ndofs],
-            );
+            self.inv_augmented_mass
+                .solve(&mut jacobians.as_mut_slice()[j_id + ndofs..j_id + 2 * ndofs]);
 
             // lhs = Jᵀ M⁻¹ J = Σ J[k]·WJ[k]; only g1/g2 entries of J are nonzero.
             let lhs = jacobians[j_id + ndofs + g2] - c.coeff * jacobians[j_id + ndofs + g1];
@@ -1557,6 +1630,18 @@ impl Multibody {
         bodies: &RigidBodySet,
         read_root_pose_from_rigid_body: bool,
     ) {
+        self.forward_kinematics_poses(bodies, read_root_pose_from_rigid_body);
+        self.update_body_jacobians();
+    }
+
+    /// naofarm's patch: [`Self::forward_kinematics`] without the body
+    /// jacobians, for the end of a step: the next step's forward
+    /// kinematics forms them again before anything reads them.
+    pub(crate) fn forward_kinematics_poses(
+        &mut self,
+        bodies: &RigidBodySet,
+        read_root_pose_from_rigid_body: bool,
+    ) {
         // Be sure the degrees of freedom match and take the root position if needed.
         self.update_root_type(bodies, read_root_pose_from_rigid_body);
 
@@ -1591,11 +1676,6 @@ impl Multibody {
                 "A rigid-body that is not at the root of a multibody must be dynamic."
             );
         }
-
-        /*
-         * Compute body jacobians.
-         */
-        self.update_body_jacobians();
     }
 
     /// Computes the ids of all the links between the root and the link identified by `link_id`.
@@ -1774,7 +1854,7 @@ impl Multibody {
             let mut out_invm_j = jacobians.rows_mut(wj_id, self.ndofs);
             self.augmented_mass_indices
                 .with_rearranged_rows_mut(&mut out_invm_j, |out_invm_j| {
-                    lu_solve(&self.inv_augmented_mass, out_invm_j.as_mut_slice());
+                    self.inv_augmented_mass.solve(out_invm_j.as_mut_slice());
                 });
         }
 
@@ -1847,7 +1927,7 @@ impl Multibody {
             let mut out_invm_j = jacobians.rows_mut(wj_id, self.ndofs);
             self.augmented_mass_indices
                 .with_rearranged_rows_mut(&mut out_invm_j, |out_invm_j| {
-                    lu_solve(&self.inv_augmented_mass, out_invm_j.as_mut_slice());
+                    self.inv_augmented_mass.solve(out_invm_j.as_mut_slice());
                 });
         }
 

@@ -5,7 +5,6 @@ use crate::dynamics::joint::MultibodyLink;
 use crate::dynamics::solver::{GenericJointConstraint, WritebackId};
 use crate::dynamics::{IntegrationParameters, JointMotor, Multibody};
 use crate::math::{DVector, Real};
-use crate::utils::slice_blas::lu_solve;
 
 /// Initializes and generate the velocity constraints applicable to the multibody links attached
 /// to this multibody_joint.
@@ -48,10 +47,9 @@ pub fn unit_joint_limit_constraint(
     jacobians.rows_mut(*j_id, ndofs * 2).fill(0.0);
     jacobians[dof_j_id] = 1.0;
     jacobians[dof_j_id + ndofs] = 1.0;
-    lu_solve(
-        multibody.inv_augmented_mass(),
-        &mut jacobians.as_mut_slice()[*j_id + ndofs..*j_id + 2 * ndofs],
-    );
+    multibody
+        .inv_augmented_mass()
+        .solve(&mut jacobians.as_mut_slice()[*j_id + ndofs..*j_id + 2 * ndofs]);
 
     let lhs = jacobians[dof_j_id + ndofs]; // = J^t * M^-1 J
     let impulse_bounds = [
@@ -113,10 +111,9 @@ pub fn unit_joint_friction_constraint(
     jacobians.rows_mut(*j_id, ndofs * 2).fill(0.0);
     jacobians[dof_j_id] = 1.0;
     jacobians[dof_j_id + ndofs] = 1.0;
-    lu_solve(
-        multibody.inv_augmented_mass(),
-        &mut jacobians.as_mut_slice()[*j_id + ndofs..*j_id + 2 * ndofs],
-    );
+    multibody
+        .inv_augmented_mass()
+        .solve(&mut jacobians.as_mut_slice()[*j_id + ndofs..*j_id + 2 * ndofs]);
 
     let lhs = jacobians[dof_j_id + ndofs]; // = J^t * M^-1 J
     let max_impulse = friction * params.dt;
@@ -172,10 +169,9 @@ pub fn unit_joint_motor_constraint(
     jacobians.rows_mut(*j_id, ndofs * 2).fill(0.0);
     jacobians[dof_j_id] = 1.0;
     jacobians[dof_j_id + ndofs] = 1.0;
-    lu_solve(
-        multibody.inv_augmented_mass(),
-        &mut jacobians.as_mut_slice()[*j_id + ndofs..*j_id + 2 * ndofs],
-    );
+    multibody
+        .inv_augmented_mass()
+        .solve(&mut jacobians.as_mut_slice()[*j_id + ndofs..*j_id + 2 * ndofs]);
 
     let lhs = jacobians[dof_j_id + ndofs]; // = J^t * M^-1 J
     let impulse_bounds = [-motor_params.max_impulse, motor_params.max_impulse];

@@ -86,10 +86,15 @@ impl GenericRhs {
                 }
             }
             GenericRhs::GenericId(solver_vel) => {
+                // naofarm's patch: nalgebra's `axpy` arithmetic on the
+                // contiguous slices, vectorised.
                 let wj_id = j_id + ndofs;
-                let wj = jacobians.rows(wj_id, ndofs);
-                let mut rhs = solver_vels.rows_mut(*solver_vel as usize, ndofs);
-                rhs.axpy(impulse, &wj, 1.0);
+                let v = *solver_vel as usize;
+                crate::utils::slice_blas::axpy(
+                    &mut solver_vels.as_mut_slice()[v..v + ndofs],
+                    impulse,
+                    &jacobians.as_slice()[wj_id..wj_id + ndofs],
+                );
             }
             GenericRhs::Fixed => {}
         }

@@ -316,6 +316,18 @@ impl GenericJointConstraint {
         let wj1 = DVectorView::from_slice(&jacobians[self.wj_id1()..], self.ndofs1);
         solver_vel1.axpy(delta_impulse, &wj1, 1.0);
 
+        // naofarm's patch: a multibody's velocities are a contiguous slice;
+        // the slice kernel does nalgebra's `axpy` arithmetic, vectorised.
+        if self.solver_vel2 != u32::MAX && !self.is_rigid_body2 {
+            let (v, n) = (self.solver_vel2 as usize, self.ndofs2);
+            let wj = self.wj_id2();
+            crate::utils::slice_blas::axpy(
+                &mut generic_solver_vels.as_mut_slice()[v..v + n],
+                -delta_impulse,
+                &jacobians[wj..wj + n],
+            );
+            return;
+        }
         let mut solver_vel2 = self.solver_vel2_mut(solver_vels, generic_solver_vels);
         let wj2 = DVectorView::from_slice(&jacobians[self.wj_id2()..], self.ndofs2);
         solver_vel2.axpy(-delta_impulse, &wj2, 1.0);

@@ -98,8 +98,18 @@ impl VelocitySolver {
             }
         }
 
-        self.generic_solver_vels_increment = DVector::zeros(multibody_solver_id as usize);
-        self.generic_solver_vels = DVector::zeros(multibody_solver_id as usize);
+        // naofarm's patch: zeroed in place when the size is the same.
+        let n = multibody_solver_id as usize;
+        for v in [
+            &mut self.generic_solver_vels_increment,
+            &mut self.generic_solver_vels,
+        ] {
+            if v.len() == n {
+                v.fill(0.0);
+            } else {
+                *v = DVector::zeros(n);
+            }
+        }
 
         for link in &self.multibody_roots {
             let multibody = multibodies
@@ -139,7 +149,13 @@ impl VelocitySolver {
                 .rows(multibody.solver_id as usize, multibody.ndofs());
             multibody.velocities.copy_from(&solver_vels);
             multibody.integrate(params.dt);
-            multibody.forward_kinematics(bodies, false);
+            if is_last_substep {
+                // naofarm's patch: the poses only; the next step's forward
+                // kinematics forms the jacobians before they are read.
+                multibody.forward_kinematics_poses(bodies, false);
+            } else {
+                multibody.forward_kinematics(bodies, false);
+            }
             multibody.update_rigid_bodies_internal(bodies, !is_last_substep, true, false);
 
             if !is_last_substep {
