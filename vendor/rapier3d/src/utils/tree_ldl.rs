@@ -8,8 +8,9 @@
 //! `H[i][j] = 0` unless one of `i`, `j` is an ancestor of the other, and
 //! `H = Lᵀ D L` with a unit lower-triangular `L` of the same pattern: no
 //! fill-in. Each row of `L` is stored packed, its ancestors' entries from the
-//! parent up, so the factorisation costs `O(Σ depth²)` and a solve
-//! `O(Σ depth)` against the dense LU's `O(n³)` and `O(n²)`.
+//! root down, so the factorisation costs `O(Σ depth²)` and a solve
+//! `O(Σ depth)` against the dense LU's `O(n³)` and `O(n²)`. The pattern
+//! (which entries each row holds) is built once per tree, not per matrix.
 //! Must not: pivot (`H` is symmetric positive definite), or read an entry
 //! of `H` outside the pattern.
 
@@ -26,6 +27,8 @@ pub const NO_PARENT: usize = usize::MAX;
 #[derive(Clone, Debug, Default)]
 #[cfg_attr(feature = "serde-serialize", derive(serde::Serialize, serde::Deserialize))]
 pub struct TreeLdl {
+    /// The tree the pattern below was built for.
+    parents: Vec<usize>,
     /// Each degree of freedom's first entry in `l` and `ancestors`.
     row_start: Vec<usize>,
     /// Row `i` of `L` below the diagonal, packed: its ancestors' entries from
@@ -58,36 +61,18 @@ impl TreeLdl {
     pub fn refactor(&mut self, h: &DMatrix<Real>, parents: &[usize]) -> bool {
         let n = parents.len();
         assert!(h.nrows() >= n && h.ncols() >= n, "TreeLdl: matrix too small");
-        self.row_start.clear();
+        if self.parents != parents {
+            self.build_pattern(parents);
+        }
         self.l.clear();
-        self.ancestors.clear();
-        self.run_start.clear();
-        self.runs.clear();
         self.d.clear();
-        for (i, &p) in parents.iter().enumerate() {
-            assert!(p == NO_PARENT || p < i, "TreeLdl: a parent after its child");
-            let start = self.l.len();
-            self.row_start.push(start);
-            self.run_start.push(self.runs.len());
+        for i in 0..n {
             self.d.push(h[(i, i)]);
-            // The parent's ancestors, then the parent.
-            if p != NO_PARENT {
-                let (p0, p1) = (self.row_start[p], self.row_start[p + 1]);
-                self.ancestors.extend_from_within(p0..p1);
-                self.ancestors.push(p);
-                let (r0, r1) = (self.run_start[p], self.run_start[p + 1]);
-                self.runs.extend_from_within(r0..r1);
-                match self.runs[r1..].last_mut() {
-                    Some(last) if last.0 + last.1 == p => last.1 += 1,
-                    _ => self.runs.push((p, 1)),
-                }
-            }
-            for e in start..self.ancestors.len() {
+            let (r0, r1) = (self.row_start[i], self.row_start[i + 1]);
+            for e in r0..r1 {
                 self.l.push(h[(i, self.ancestors[e])]);
             }
         }
-        self.row_start.push(self.l.len());
-        self.run_start.push(self.runs.len());
 
         for k in (0..n).rev() {
             let dk = self.d[k];
@@ -112,6 +97,35 @@ impl TreeLdl {
             }
         }
         true
+    }
+
+    /// Each row's ancestors and their runs for the tree `parents`.
+    fn build_pattern(&mut self, parents: &[usize]) {
+        self.parents.clear();
+        self.parents.extend_from_slice(parents);
+        self.row_start.clear();
+        self.ancestors.clear();
+        self.run_start.clear();
+        self.runs.clear();
+        for (i, &p) in parents.iter().enumerate() {
+            assert!(p == NO_PARENT || p < i, "TreeLdl: a parent after its child");
+            self.row_start.push(self.ancestors.len());
+            self.run_start.push(self.runs.len());
+            // The parent's ancestors, then the parent.
+            if p != NO_PARENT {
+                let (p0, p1) = (self.row_start[p], self.row_start[p + 1]);
+                self.ancestors.extend_from_within(p0..p1);
+                self.ancestors.push(p);
+                let (r0, r1) = (self.run_start[p], self.run_start[p + 1]);
+                self.runs.extend_from_within(r0..r1);
+                match self.runs[r1..].last_mut() {
+                    Some(last) if last.0 + last.1 == p => last.1 += 1,
+                    _ => self.runs.push((p, 1)),
+                }
+            }
+        }
+        self.row_start.push(self.ancestors.len());
+        self.run_start.push(self.runs.len());
     }
 
     /// The dimension of the factored matrix.
