@@ -414,6 +414,30 @@ pub struct ProgramArgs {
     /// every process it started are killed and the trial fails.
     #[arg(long, default_value_t = 600.0)]
     pub program_timeout_s: f64,
+    /// How long a program asked to stop (SIGTERM: the worker stopping) has
+    /// before it and everything it started are killed, s.
+    #[arg(long, default_value_t = 5.0)]
+    pub program_grace_s: f64,
+    /// Pass a variable to every program (repeatable): NAME=VALUE, or NAME
+    /// for this process's own value. Programs get nothing else of the
+    /// worker's environment but PATH and LANG.
+    #[arg(long = "program-env", value_name = "NAME[=VALUE]")]
+    pub program_env: Vec<String>,
+    /// Address space of each program process, MiB (0: no limit; default:
+    /// the host's memory over the worker's slots).
+    #[arg(long, value_name = "MIB")]
+    pub program_memory_mib: Option<u64>,
+    /// Processes of the programs' user (0: no limit; default 4096; the
+    /// kernel does not apply it to root).
+    #[arg(long, value_name = "N")]
+    pub program_processes: Option<u64>,
+    /// Largest file a program may write, MiB (0: no limit; default 16384).
+    #[arg(long, value_name = "MIB")]
+    pub program_file_size_mib: Option<u64>,
+    /// CPU seconds of each program process (0 or unset: no limit; the
+    /// time-out bounds a trial's wall time).
+    #[arg(long, value_name = "S")]
+    pub program_cpu_s: Option<u64>,
 }
 
 /// Arguments of `stand`.

@@ -234,6 +234,7 @@ pub fn set_key(name: &str) -> String {
 /// `--version`) with `--program-timeout-s`; a bad one is a usage error.
 pub async fn register_programs(
     args: &crate::args::ProgramArgs,
+    slots: u32,
 ) -> Result<worker::program::Programs, Failure> {
     let t = args.program_timeout_s;
     usage_unless(t.is_finite() && t > 0.0 && t <= 86_400.0, || {
@@ -242,7 +243,34 @@ pub async fn register_programs(
             protocol::params::Shown(t)
         )
     })?;
-    worker::program::Programs::register(&args.programs, std::time::Duration::from_secs_f64(t))
+    let g = args.program_grace_s;
+    usage_unless(g.is_finite() && (0.0..=600.0).contains(&g), || {
+        format!(
+            "--program-grace-s {}: must be in [0, 600] seconds",
+            protocol::params::Shown(g)
+        )
+    })?;
+    let env = worker::program::Settings::parse_env(&args.program_env)
+        .map_err(|e| Failure::Usage(anyhow::anyhow!(e)))?;
+    let d = worker::job::Limits::defaults(slots);
+    let given = |v: Option<u64>, default: Option<u64>| match v {
+        Some(0) => None,
+        Some(v) => Some(v),
+        None => default,
+    };
+    let limits = worker::job::Limits {
+        memory_mib: given(args.program_memory_mib, d.memory_mib),
+        processes: given(args.program_processes, d.processes),
+        file_size_mib: given(args.program_file_size_mib, d.file_size_mib),
+        cpu_s: given(args.program_cpu_s, d.cpu_s),
+    };
+    let settings = worker::program::Settings {
+        timeout: std::time::Duration::from_secs_f64(t),
+        grace: std::time::Duration::from_secs_f64(g),
+        env,
+        limits,
+    };
+    worker::program::Programs::register(&args.programs, settings)
         .await
         .map_err(|e| Failure::Usage(e.into()))
 }

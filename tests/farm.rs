@@ -620,13 +620,16 @@ fn program_worker(port: u16, programs: &[(&str, &str)]) -> Proc {
     program_worker_with(port, programs, &[])
 }
 
-/// [`program_worker`] with variables set for its programs.
+/// [`program_worker`] passing variables to its programs (`--program-env`).
 fn program_worker_with(port: u16, programs: &[(&str, &str)], vars: &[(&str, &Path)]) -> Proc {
     let mut cmd = naofarm();
-    cmd.envs(vars.iter().copied());
     cmd.args(["worker", "--connect", &format!("tcp/127.0.0.1:{port}")])
-        .args(["--slots", "2"])
-        .env("RUST_LOG", "warn,naofarm_worker::service=debug")
+        .args(["--slots", "2"]);
+    for (name, value) in vars {
+        cmd.arg("--program-env")
+            .arg(format!("{name}={}", value.display()));
+    }
+    cmd.env("RUST_LOG", "warn,naofarm_worker::service=debug")
         .stdout(Stdio::null());
     for (name, file) in programs {
         let path = root().join("tests/programs").join(file);

@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use protocol::{wire::WireMessage, Physics, TrialModel, TrialRequest};
 use util::{naofarm, root, scratch};
-use worker::program::{run, Program, Programs};
+use worker::program::{run, Program, Programs, Settings};
 
 fn program(name: &str) -> Program {
     let rt = tokio::runtime::Builder::new_current_thread()
@@ -41,7 +41,9 @@ fn request(program: &str, params: &[(&str, f64)]) -> TrialRequest {
     }
 }
 
-/// Runs one trial of tests/programs/NAME in a fresh scratch directory.
+/// Runs one trial of tests/programs/NAME in a fresh scratch directory
+/// (passing it NAOFARM_TEST_PID_FILE, as a worker's owner would with
+/// `--program-env`).
 fn trial(name: &str, timeout: Duration) -> Result<protocol::measurement::Measurement, String> {
     let dir = scratch(&format!("program-{name}"));
     let p = program(name);
@@ -50,7 +52,13 @@ fn trial(name: &str, timeout: Duration) -> Result<protocol::measurement::Measure
         .enable_all()
         .build()
         .unwrap();
-    rt.block_on(run(&p, &req, 1, &dir.join("slot-1"), timeout))
+    let settings = Settings {
+        timeout,
+        env: Settings::parse_env(&["NAOFARM_TEST_PID_FILE".into()]).unwrap(),
+        ..Settings::default()
+    };
+    let stop = tokio_util::sync::CancellationToken::new();
+    rt.block_on(run(&p, &req, 1, &dir.join("slot-1"), &settings, &stop))
 }
 
 #[test]
@@ -126,7 +134,7 @@ fn a_worker_refuses_a_trial_of_a_program_it_did_not_register() {
     let programs = rt
         .block_on(Programs::register(
             &[format!("toy={}", toy.display())],
-            Duration::from_secs(5),
+            Settings::default(),
         ))
         .unwrap();
     let cfg = worker::service::WorkerConfig {

@@ -135,6 +135,24 @@ impl Scheduler {
         w.last_seen = now;
     }
 
+    /// Worker `id` says it is running the dispatches `running`: the leases of
+    /// its trials in flight under those ids start again from `now`, so a
+    /// trial longer than its lease stays with a worker that keeps speaking.
+    /// A trial it no longer names keeps its lease and comes back when that
+    /// passes.
+    pub fn renew(&mut self, id: &str, running: &[u64], now: Instant) {
+        let Some(w) = self.workers.get(id) else {
+            return;
+        };
+        for t in &w.assigned {
+            if let Some(f) = self.inflight.get_mut(t) {
+                if f.worker == id && running.contains(&f.dispatch) {
+                    f.deadline = now + self.lease;
+                }
+            }
+        }
+    }
+
     /// A worker is gone: returns the trials it held (no longer in flight).
     pub fn worker_gone(&mut self, id: &str) -> Vec<TrialId> {
         let Some(w) = self.workers.remove(id) else {

@@ -626,7 +626,11 @@ async fn serve_loop(
             s = subs.presence.recv_async() => {
                 let s = s.map_err(zerr)?;
                 match WorkerPresence::decode(&s.payload().to_bytes()) {
-                    Ok(p) => st.sched.worker_seen(&p.worker, Some(p.slots), Instant::now()),
+                    Ok(p) => {
+                        let now = Instant::now();
+                        st.sched.worker_seen(&p.worker, Some(p.slots), now);
+                        st.sched.renew(&p.worker, &p.running, now);
+                    }
                     Err(e) => st.refuse("an undecodable message", &format!("presence: {e}")),
                 }
             }
@@ -636,7 +640,7 @@ async fn serve_loop(
                 if s.kind() == SampleKind::Delete {
                     st.live.remove(&wid);
                     st.gone.push((wid, Instant::now()));
-                    no_worker_fits(st)?;
+                    no_worker_fits(st, false)?;
                 } else {
                     st.live.insert(wid);
                 }

@@ -18,7 +18,7 @@ use crate::{
 /// carry (the parameter registry's names and a trial request's physics):
 /// a decoder of another version refuses the message by its envelope, so
 /// workers of two builds never serve one run with different walks.
-pub const WIRE_VERSION: u8 = 23;
+pub const WIRE_VERSION: u8 = 24;
 /// Largest message accepted, in bytes (checked before any allocation).
 pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
 const MAGIC: [u8; 2] = *b"NF";
@@ -425,8 +425,8 @@ impl WireMessage for TrialFailure {
         if self.worker.len() > 128 {
             return Err(("worker", "longer than 128 bytes".into()));
         }
-        if self.reason.len() > 4096 {
-            return Err(("reason", "longer than 4096 bytes".into()));
+        if self.reason.len() > MAX_FAILURE_REASON {
+            return Err(("reason", format!("longer than {MAX_FAILURE_REASON} bytes")));
         }
         Ok(())
     }
@@ -745,6 +745,10 @@ pub struct WorkerPresence {
     pub busy: u32,
     /// naofarm version of the worker.
     pub version: String,
+    /// The dispatch ids of this run's trials the worker is running now: the
+    /// run renews their leases, so a trial longer than its lease is never
+    /// offered again while its worker speaks.
+    pub running: Vec<u64>,
 }
 
 impl WireMessage for WorkerPresence {
@@ -760,6 +764,9 @@ impl WireMessage for WorkerPresence {
         }
         if self.version.len() > 64 {
             return Err(("version", "longer than 64 bytes".into()));
+        }
+        if self.running.len() > self.slots as usize {
+            return Err(("running", "more trials running than slots".into()));
         }
         Ok(())
     }
@@ -838,6 +845,33 @@ pub fn reason_counts<'a>(
 }
 
 /// `s` cut to at most `max` bytes on a character boundary.
+/// The longest reason a [`TrialFailure`] carries, in bytes.
+pub const MAX_FAILURE_REASON: usize = 4096;
+
+/// A failure's reason as the wire takes it: control characters escaped (a
+/// reason is one line), cut on a character boundary to at most
+/// [`MAX_FAILURE_REASON`] bytes with `…` marking the cut. Never refused.
+#[must_use]
+pub fn fit_reason(reason: &str) -> String {
+    let mut out = String::with_capacity(reason.len().min(MAX_FAILURE_REASON));
+    for c in reason.chars() {
+        if c.is_control() {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+        if out.len() > MAX_FAILURE_REASON {
+            break;
+        }
+    }
+    if out.len() > MAX_FAILURE_REASON {
+        let mut kept = cut(&out, MAX_FAILURE_REASON - '…'.len_utf8());
+        kept.push('…');
+        return kept;
+    }
+    out
+}
+
 fn cut(s: &str, max: usize) -> String {
     let mut end = s.len().min(max);
     while !s.is_char_boundary(end) {
@@ -940,6 +974,10 @@ pub struct WorkerStatus {
     /// The trial programs it registered, by name.
     #[serde(default)]
     pub programs: Vec<String>,
+    /// How it contains its programs' processes (docs/programs.md), e.g.
+    /// `cgroup v2 + PID namespace`.
+    #[serde(default)]
+    pub containment: String,
 }
 
 impl WireMessage for WorkerStatus {
@@ -979,6 +1017,12 @@ impl WireMessage for WorkerStatus {
         for p in &self.programs {
             crate::experiment::check_program_name(p).map_err(|m| ("programs", m))?;
         }
+        if self.containment.len() > 128 || self.containment.chars().any(char::is_control) {
+            return Err((
+                "containment",
+                "not a description of at most 128 printable bytes".into(),
+            ));
+        }
         Ok(())
     }
 }
@@ -987,6 +1031,29 @@ impl WireMessage for WorkerStatus {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    /// A reason of any length or content fits the wire: escaped, cut on a
+    /// character boundary, and a failure carrying it decodes.
+    #[test]
+    fn any_reason_fits_a_failure() {
+        let junk = format!("{}\u{1b}[31m\n{}", "é".repeat(3000), "x".repeat(3000));
+        let r = fit_reason(&junk);
+        assert!(r.len() <= MAX_FAILURE_REASON, "{}", r.len());
+        assert!(r.ends_with('…') && !r.chars().any(char::is_control));
+        assert_eq!(fit_reason("a\tb\u{7}"), "a\\tb\\u{7}");
+        assert_eq!(fit_reason("short"), "short");
+        let f = TrialFailure {
+            run: "r".into(),
+            iteration: 0,
+            trial: 0,
+            seed: 1,
+            dispatch: 2,
+            worker: "w".into(),
+            reason: r,
+            refused: false,
+        };
+        assert_eq!(TrialFailure::decode(&f.encode().unwrap()), Ok(f));
+    }
 
     fn stats() -> impl Strategy<Value = Stats> {
         (0u32..20, any::<bool>(), -5.0f64..5.0, 0.0f64..1.0).prop_map(|(n, some, x, e)| Stats {
@@ -1046,7 +1113,7 @@ mod tests {
 
         #[test]
         fn presence_and_status_round_trip(w in run(), slots in 1u32..64, a in 0u64..100, e in 0u64..100, r in 0u64..100, ps in params()) {
-            let p = WorkerPresence { worker: w.clone(), slots, busy: slots / 2, version: "0.1.0".into() };
+            let p = WorkerPresence { worker: w.clone(), slots, busy: slots / 2, version: "0.1.0".into(), running: (0..u64::from(slots / 2)).collect() };
             prop_assert_eq!(WorkerPresence::decode(&p.encode().unwrap()), Ok(p));
             let s = RunStatus { run: w.clone(), id: format!("{w}-id"), priority: 2, state: RunState::Running, planned: 500, opened: a + e + r + 2, decided: a + e + r, accepts: a,
                                 equivalents: e, rejects: r, best: None, optim2: ps, optim2_decided: a + e + r, workers: 3, trials_per_s: 1.5, finished: false,

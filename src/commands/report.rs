@@ -67,7 +67,10 @@ pub fn report(
         .enable_all()
         .build()
         .map_err(|e| Failure::Job(e.into()))?
-        .block_on(crate::common::register_programs(programs))?;
+        .block_on(crate::common::register_programs(
+            programs,
+            u32::try_from(threads.max(1)).unwrap_or(1),
+        ))?;
     match (dirs, out) {
         ([], _) => Err(Failure::Usage(anyhow!("give at least one run directory"))),
         ([dir], out) => one(dir, read(dir)?, out, programs, trials, threads).map(|_| ()),
@@ -394,7 +397,7 @@ fn run_trials(
                 exp.name
             ))
         })?;
-        return program_trials(exp, params, program, programs.timeout, trials, threads);
+        return program_trials(exp, params, program, &programs.settings, trials, threads);
     }
     trial::in_parallel(u64::from(trials), threads, |k| {
         let k = k as u32;
@@ -406,17 +409,20 @@ fn run_trials(
     .collect()
 }
 
-/// Table IV's trials of a program's set, `threads` at once (one slot each,
-/// in a scratch directory of the report's own), each as a worker runs it.
+/// Table IV's trials of a program's set, `threads` at once (each in a slot
+/// of the host's, in a scratch directory of the report's own), each as a
+/// worker runs it. Ctrl-C (or SIGTERM) stops the programs as a stopping
+/// worker does, and the report with them.
 fn program_trials(
     exp: &Experiment,
     params: &[f64],
     program: &worker::program::Program,
-    timeout: std::time::Duration,
+    settings: &worker::program::Settings,
     trials: u32,
     threads: usize,
 ) -> Result<Vec<(protocol::measurement::Measurement, Option<Footwork>)>, Failure> {
-    let scratch = std::env::temp_dir().join(format!("naofarm-report-{}", uuid::Uuid::new_v4()));
+    let scratch = worker::job::Scratch::create("report", &uuid::Uuid::new_v4().to_string())
+        .map_err(|e| Failure::Job(anyhow!("the programs' scratch space: {e}")))?;
     let lanes = u32::try_from(threads.max(1))
         .unwrap_or(1)
         .min(trials.max(1));
@@ -424,14 +430,19 @@ fn program_trials(
         .enable_all()
         .build()
         .map_err(|e| Failure::Job(e.into()))?;
+    let stop = tokio_util::sync::CancellationToken::new();
     let found = rt.block_on(async {
-        let lane = |slot: u32| {
-            let dir = scratch.join(format!("slot-{slot}"));
+        let lane = |lane: u32| {
+            let stop = stop.clone();
+            let root = scratch.path().to_path_buf();
             async move {
+                let slot = worker::job::Slot::claim()
+                    .map_err(|e| Failure::Job(anyhow!("no slot for the program: {e}")))?;
+                let dir = root.join(format!("slot-{}", slot.n));
                 let mut got = Vec::new();
-                for k in (slot..trials).step_by(lanes as usize) {
+                for k in (lane..trials).step_by(lanes as usize) {
                     let req = table_request(exp, params, k);
-                    let m = worker::program::run(program, &req, slot, &dir, timeout)
+                    let m = worker::program::run(program, &req, slot.n, &dir, settings, &stop)
                         .await
                         .map_err(|e| Failure::Job(anyhow!("Table IV trial {k}: {e}")))?;
                     got.push((k, m));
@@ -439,10 +450,18 @@ fn program_trials(
                 Ok::<_, Failure>(got)
             }
         };
-        futures_util::future::join_all((0..lanes).map(lane)).await
+        let all = futures_util::future::join_all((0..lanes).map(lane));
+        tokio::pin!(all);
+        tokio::select! {
+            found = &mut all => found,
+            why = crate::serve::interrupted() => {
+                stop.cancel();
+                let _ = all.await;
+                vec![Err(Failure::Job(anyhow!("interrupted by {why}: the programs were stopped")))]
+            }
+        }
     });
-    // Only this report wrote there (a fresh name).
-    let _ = std::fs::remove_dir_all(&scratch);
+    drop(scratch);
     let mut all = Vec::new();
     for lane in found {
         all.extend(lane?);

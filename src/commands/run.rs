@@ -73,7 +73,7 @@ pub fn run(
     let prepared = prepare_run(job)?;
     let rt = runtime()?;
     rt.block_on(async {
-        let programs = crate::common::register_programs(programs).await?;
+        let programs = crate::common::register_programs(programs, n).await?;
         let session = open_session(ccfg, "coordinator", &coord_net.connect).await?;
         let (run, effects) = prepared.open_beside(&session).await?;
         let endpoint = session
@@ -101,6 +101,16 @@ pub fn run(
             tls,
         };
         let shutdown = signals();
+        // The workers stop when the run ends or on a signal, and are waited
+        // for: each stops its programs and removes its scratch space.
+        let (stop_workers, workers_stop) = tokio::sync::watch::channel(false);
+        let mut on_signal = shutdown.clone();
+        let forward = stop_workers.clone();
+        tokio::spawn(async move {
+            if on_signal.wait_for(|s| *s).await.is_ok() {
+                let _ = forward.send(true);
+            }
+        });
         let mut handles = Vec::new();
         let mut worker_sessions = Vec::new();
         for _ in 0..n {
@@ -115,7 +125,7 @@ pub fn run(
             handles.push(tokio::spawn(worker::service::serve(
                 ws,
                 cfg,
-                shutdown.clone(),
+                workers_stop.clone(),
             )));
         }
         let (ended, view) = serve_with_view(
@@ -127,11 +137,16 @@ pub fn run(
             json,
         )
         .await;
+        let _ = stop_workers.send(true);
+        for h in handles {
+            match h.await {
+                Ok(Ok(_)) => {}
+                Ok(Err(e)) => tracing::warn!(error = %e, "a local worker failed"),
+                Err(e) => tracing::warn!(error = %e, "a local worker's task ended"),
+            }
+        }
         for ws in &worker_sessions {
             let _ = ws.close().await;
-        }
-        for h in handles {
-            h.abort();
         }
         let _ = session.close().await;
         let ended = ended.map_err(crate::common::service_failure)?;

@@ -66,7 +66,13 @@ pub fn worker(
     }
     let rt = runtime()?;
     let done = rt.block_on(async {
-        wcfg.programs = crate::common::register_programs(programs).await?;
+        wcfg.programs = crate::common::register_programs(programs, wcfg.slots).await?;
+        if !wcfg.programs.by_name.is_empty() {
+            eprintln!(
+                "trial programs run as jobs contained by {}",
+                worker::job::Host::get().describe()
+            );
+        }
         let session = open_session(cfg, "worker", &net.connect).await?;
         let shutdown = signals();
         let s = worker::service::serve(session.clone(), wcfg, shutdown)

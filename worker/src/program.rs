@@ -12,13 +12,19 @@
 //! A coordinator names a program, never a path: only what the worker's
 //! owner registered runs. The program's identity (a hash of its file and of
 //! its `--version` line) joins the worker's fingerprint for the program's
-//! runs, so a run never mixes two builds of a program.
+//! runs, so a run never mixes two builds of a program; a file that changes
+//! under a running worker is a new identity before its next trial
+//! ([`Program::refreshed`]).
+//!
+//! Each trial runs as a [`crate::job::Job`]: contained, in a clean
+//! environment ([`Settings::env_for`]), under the owner's limits, and
+//! stopped whole when it ends, times out or the worker stops.
 
 use std::{
     collections::BTreeMap,
+    io::Read,
     path::{Path, PathBuf},
-    process::Stdio,
-    time::Duration,
+    time::{Duration, SystemTime},
 };
 
 use protocol::{measurement::Measurement, TrialRequest};
@@ -26,15 +32,20 @@ use serde::{Deserialize, Serialize};
 use sha3::{Digest, Sha3_256};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
+use crate::job::{Job, Limits};
+
 /// How long `PROGRAM --version` may take when the worker registers it.
 const VERSION_WITHIN: Duration = Duration::from_secs(10);
 /// Bytes of a program's standard output kept (the measurement is its last line).
 const STDOUT_TAIL: usize = 64 << 10;
 /// Bytes of a program's standard error kept for a failure's reason.
 const STDERR_TAIL: usize = 600;
-/// How long the pipes may stay open once the program's group is killed (a
-/// process that left the group may hold them).
+/// How long the pipes may stay open once the job is killed (on a host
+/// without a cgroup or a PID namespace, a process that left the job's group
+/// may hold them).
 const PIPES_WITHIN: Duration = Duration::from_secs(2);
+/// Bytes of `PROGRAM --version` read for its first line.
+const VERSION_BYTES: u64 = 4096;
 
 /// Why a program could not be registered.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -76,15 +87,97 @@ pub struct Program {
     pub version: Option<String>,
     /// Hash of the file's bytes and of `version`: the program's build.
     pub identity: u64,
+    /// The file as registered: (size, modification time, inode).
+    stamp: Option<(u64, SystemTime, u64)>,
 }
 
-/// The programs a worker serves, with how long one trial may take.
+/// How a worker runs its programs' trials.
+#[derive(Debug, Clone)]
+pub struct Settings {
+    /// Longest wall time of one trial before the program is killed.
+    pub timeout: Duration,
+    /// How long a program asked to stop (SIGTERM) has before it is killed.
+    pub grace: Duration,
+    /// Variables the owner passes to every program (`--program-env`).
+    pub env: Vec<(String, String)>,
+    /// What a program may use.
+    pub limits: Limits,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self {
+            timeout: Duration::from_secs(600),
+            grace: Duration::from_secs(5),
+            env: Vec::new(),
+            limits: Limits::default(),
+        }
+    }
+}
+
+/// Variables a program always gets, set by the worker: the owner's
+/// `--program-env` cannot name them.
+pub const SET_BY_THE_WORKER: [&str; 2] = ["HOME", "TMPDIR"];
+
+impl Settings {
+    /// A program's whole environment in `scratch`: PATH and LANG (the
+    /// worker's, or a plain default), HOME and TMPDIR inside the scratch,
+    /// then what the owner passes. Nothing else of the worker's.
+    #[must_use]
+    pub fn env_for(&self, scratch: &Path) -> Vec<(String, String)> {
+        let path = std::env::var("PATH").unwrap_or_else(|_| "/usr/local/bin:/usr/bin:/bin".into());
+        let lang = std::env::var("LANG").unwrap_or_else(|_| "C.UTF-8".into());
+        let mut env: BTreeMap<String, String> = BTreeMap::from([
+            ("PATH".into(), path),
+            ("LANG".into(), lang),
+            ("HOME".into(), scratch.join("home").display().to_string()),
+            ("TMPDIR".into(), scratch.join("tmp").display().to_string()),
+        ]);
+        for (k, v) in &self.env {
+            if !SET_BY_THE_WORKER.contains(&k.as_str()) {
+                env.insert(k.clone(), v.clone());
+            }
+        }
+        env.into_iter().collect()
+    }
+
+    /// Reads `--program-env` texts: `NAME=VALUE`, or `NAME` for the
+    /// worker's own value (absent when the worker has none).
+    pub fn parse_env(specs: &[String]) -> Result<Vec<(String, String)>, String> {
+        let mut out = Vec::new();
+        for spec in specs {
+            let (name, value) = match spec.split_once('=') {
+                Some((n, v)) => (n, Some(v.to_string())),
+                None => (spec.as_str(), None),
+            };
+            let ok = !name.is_empty()
+                && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+                && !name.starts_with(|c: char| c.is_ascii_digit());
+            if !ok {
+                return Err(format!(
+                    "--program-env {spec}: `{name}` is not a variable name"
+                ));
+            }
+            if SET_BY_THE_WORKER.contains(&name) {
+                return Err(format!(
+                    "--program-env {spec}: {name} is the program's own, inside its scratch"
+                ));
+            }
+            if let Some(v) = value.or_else(|| std::env::var(name).ok()) {
+                out.push((name.to_string(), v));
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// The programs a worker serves, with how it runs them.
 #[derive(Debug, Clone, Default)]
 pub struct Programs {
     /// The programs by name.
     pub by_name: BTreeMap<String, Program>,
-    /// Longest wall time of one trial before the program is killed.
-    pub timeout: Duration,
+    /// How their trials run.
+    pub settings: Settings,
 }
 
 impl Programs {
@@ -95,7 +188,7 @@ impl Programs {
     }
 
     /// Registers `NAME=PATH` texts (from the command line); a name twice is an error.
-    pub async fn register(specs: &[String], timeout: Duration) -> Result<Self, ProgramError> {
+    pub async fn register(specs: &[String], settings: Settings) -> Result<Self, ProgramError> {
         let mut by_name = BTreeMap::new();
         for spec in specs {
             let (name, path) = spec
@@ -106,7 +199,7 @@ impl Programs {
                 return Err(ProgramError::Twice(name.to_string()));
             }
         }
-        Ok(Self { by_name, timeout })
+        Ok(Self { by_name, settings })
     }
 }
 
@@ -131,10 +224,19 @@ impl Program {
         if std::os::unix::fs::PermissionsExt::mode(&meta.permissions()) & 0o111 == 0 {
             return Err(bad("not executable".into()));
         }
-        let bytes = std::fs::read(&path).map_err(|e| bad(e.to_string()))?;
-        let version = version_line(&path).await;
+        let stamp = stamp(&meta);
         let mut h = Sha3_256::new();
-        h.update(&bytes);
+        let mut file = std::fs::File::open(&path).map_err(|e| bad(e.to_string()))?;
+        let mut chunk = vec![0u8; 1 << 16];
+        loop {
+            match file.read(&mut chunk) {
+                Ok(0) => break,
+                Ok(n) => h.update(&chunk[..n]),
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(bad(e.to_string())),
+            }
+        }
+        let version = version_line(&path).await;
         h.update(version.as_deref().unwrap_or("").as_bytes());
         let d = h.finalize();
         let mut b = [0u8; 8];
@@ -144,7 +246,18 @@ impl Program {
             path,
             version,
             identity: u64::from_le_bytes(b),
+            stamp: Some(stamp),
         })
+    }
+
+    /// This program registered anew when its file changed since it was
+    /// registered (size, modification time or inode), else `None`.
+    pub async fn refreshed(&self) -> Option<Result<Self, ProgramError>> {
+        let now = std::fs::metadata(&self.path).ok().map(|m| stamp(&m));
+        if now.is_some() && now == self.stamp {
+            return None;
+        }
+        Some(Self::register(&self.name, &self.path).await)
     }
 
     /// The worker's fingerprint for this program's runs: its own, mixed with
@@ -162,24 +275,43 @@ impl Program {
     }
 }
 
-/// The first line of `path --version`, if it says one with exit 0 in time.
+/// A file's size, modification time and inode.
+fn stamp(meta: &std::fs::Metadata) -> (u64, SystemTime, u64) {
+    use std::os::unix::fs::MetadataExt;
+    (
+        meta.len(),
+        meta.modified().unwrap_or(SystemTime::UNIX_EPOCH),
+        meta.ino(),
+    )
+}
+
+/// The first line of `path --version`, if it says one with exit 0 in time:
+/// run as a job (a clean environment, killed whole), its output read up to
+/// a few KiB.
 async fn version_line(path: &Path) -> Option<String> {
-    let mut cmd = tokio::process::Command::new(path);
-    cmd.arg("--version")
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .process_group(0)
-        .kill_on_drop(true);
-    let child = cmd.spawn().ok()?;
-    let pgid = child.id();
-    let out = tokio::time::timeout(VERSION_WITHIN, child.wait_with_output()).await;
-    kill_group(pgid);
-    let out = out.ok()?.ok()?;
-    if !out.status.success() {
+    let dir = std::env::temp_dir();
+    let env = Settings::default().env_for(&dir);
+    let mut job =
+        Job::start_with_args(path, &["--version"], &dir, &env, &Limits::default()).ok()?;
+    drop(job.child.stdin.take());
+    let mut stdout = job.child.stdout.take()?;
+    drop(job.child.stderr.take());
+    let read = async {
+        let mut out = Vec::new();
+        let _ = (&mut stdout)
+            .take(VERSION_BYTES)
+            .read_to_end(&mut out)
+            .await;
+        let status = job.child.wait().await.ok()?;
+        Some((status, out))
+    };
+    let got = tokio::time::timeout(VERSION_WITHIN, read).await;
+    job.end().await;
+    let (status, out) = got.ok()??;
+    if !status.success() {
         return None;
     }
-    let text = String::from_utf8_lossy(&out.stdout);
+    let text = String::from_utf8_lossy(&out);
     let line = text.lines().next()?.trim();
     (!line.is_empty()).then(|| line.chars().take(200).collect())
 }
@@ -224,27 +356,6 @@ pub struct ProgramMeasurement {
     pub fall_time_s: Option<f64>,
     /// Simulated time run, s.
     pub sim_time_s: f64,
-}
-
-/// A program's process group, killed when this is dropped: also when the
-/// trial's task is (the worker stopping mid-trial), so that nothing the
-/// program started outlives the trial.
-struct Group(Option<u32>);
-
-impl Drop for Group {
-    fn drop(&mut self) {
-        kill_group(self.0);
-    }
-}
-
-/// Kills a process group (the program and what it started); one already gone is fine.
-fn kill_group(pgid: Option<u32>) {
-    if let Some(id) = pgid.and_then(|p| i32::try_from(p).ok()) {
-        let _ = nix::sys::signal::killpg(
-            nix::unistd::Pid::from_raw(id),
-            nix::sys::signal::Signal::SIGKILL,
-        );
-    }
 }
 
 /// Reads a pipe to its end, keeping its last `keep` bytes or a little more
@@ -292,8 +403,11 @@ pub fn read_answer(stdout: &[u8], req: &TrialRequest) -> Result<Measurement, Str
         return Err("printed no measurement".into());
     };
     let shown: String = line.chars().take(120).collect();
-    let m: ProgramMeasurement = serde_json::from_str(line.trim())
-        .map_err(|e| format!("printed `{shown}`, not a measurement: {e}"))?;
+    let m: ProgramMeasurement = serde_json::from_str(line.trim()).map_err(|e| {
+        // serde's message may repeat the whole line.
+        let e: String = e.to_string().chars().take(200).collect();
+        format!("printed `{shown}`, not a measurement: {e}")
+    })?;
     let m = Measurement {
         fell: m.fell,
         x_m: m.x_m,
@@ -307,14 +421,18 @@ pub fn read_answer(stdout: &[u8], req: &TrialRequest) -> Result<Measurement, Str
     Ok(m)
 }
 
-/// Runs one trial of `program`: the trial on its standard input, its
-/// measurement from its standard output; any failure, with why.
+/// Runs one trial of `program` in `slot` as a job: the trial on its
+/// standard input, its measurement from its standard output; any failure,
+/// with why. When `stop` is cancelled the program is asked to stop
+/// (SIGTERM, then SIGKILL after the settings' grace) and the trial fails
+/// with "the worker is stopping".
 pub async fn run(
     program: &Program,
     req: &TrialRequest,
     slot: u32,
     scratch: &Path,
-    timeout: Duration,
+    settings: &Settings,
+    stop: &tokio_util::sync::CancellationToken,
 ) -> Result<Measurement, String> {
     let who = format!("program `{}`", program.name);
     let input = ProgramTrial {
@@ -329,22 +447,21 @@ pub async fn run(
         scratch: scratch.to_path_buf(),
     };
     let input = serde_json::to_vec(&input).map_err(|e| format!("{who}: the trial: {e}"))?;
-    std::fs::create_dir_all(scratch)
-        .map_err(|e| format!("{who}: scratch {}: {e}", scratch.display()))?;
-    let mut cmd = tokio::process::Command::new(&program.path);
-    cmd.current_dir(scratch)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .process_group(0)
-        .kill_on_drop(true);
-    let mut child = cmd
-        .spawn()
+    for d in [
+        scratch.to_path_buf(),
+        scratch.join("home"),
+        scratch.join("tmp"),
+    ] {
+        std::fs::create_dir_all(&d).map_err(|e| format!("{who}: scratch {}: {e}", d.display()))?;
+    }
+    let env = settings.env_for(scratch);
+    let mut job = Job::start(&program.path, scratch, &env, &settings.limits)
         .map_err(|e| format!("{who} did not start: {e}"))?;
-    let group = Group(child.id());
-    let (Some(mut stdin), Some(mut stdout), Some(mut stderr)) =
-        (child.stdin.take(), child.stdout.take(), child.stderr.take())
-    else {
+    let (Some(mut stdin), Some(mut stdout), Some(mut stderr)) = (
+        job.child.stdin.take(),
+        job.child.stdout.take(),
+        job.child.stderr.take(),
+    ) else {
         return Err(format!("{who}: its pipes could not be opened"));
     };
     tokio::spawn(async move {
@@ -354,11 +471,22 @@ pub async fn run(
     });
     let read_out = tokio::spawn(async move { read_tail(&mut stdout, STDOUT_TAIL).await });
     let read_err = tokio::spawn(async move { read_tail(&mut stderr, 2 * STDERR_TAIL).await });
-    let ended = tokio::time::timeout(timeout, child.wait()).await;
+    enum End {
+        Exited(std::io::Result<std::process::ExitStatus>),
+        TimedOut,
+        Stopped,
+    }
+    let end = tokio::select! {
+        s = job.child.wait() => End::Exited(s),
+        () = tokio::time::sleep(settings.timeout) => End::TimedOut,
+        () = stop.cancelled() => End::Stopped,
+    };
     // Whatever it started and left running goes with it (and with them
     // the last ends of its pipes).
-    drop(group);
-    let _ = child.kill().await;
+    match end {
+        End::Stopped => job.stop(settings.grace).await,
+        End::Exited(_) | End::TimedOut => job.end().await,
+    }
     let drained = |h: tokio::task::JoinHandle<Vec<u8>>| async move {
         match tokio::time::timeout(PIPES_WITHIN, h).await {
             Ok(Ok(b)) => b,
@@ -366,20 +494,33 @@ pub async fn run(
         }
     };
     let (out, err) = (drained(read_out).await, drained(read_err).await);
-    let Ok(status) = ended else {
-        return Err(format!(
-            "{who} did not answer within {} s; it and every process it started were killed; {}",
-            timeout.as_secs_f64(),
-            tail(&err)
-        ));
+    let status = match end {
+        End::Stopped => {
+            return Err(format!(
+                "the worker is stopping; {who} was stopped; {}",
+                tail(&err)
+            ));
+        }
+        End::TimedOut => {
+            return Err(format!(
+                "{who} did not answer within {} s; it and every process it started were killed; {}",
+                settings.timeout.as_secs_f64(),
+                tail(&err)
+            ));
+        }
+        End::Exited(s) => s.map_err(|e| format!("{who}: {e}"))?,
     };
-    let status = status.map_err(|e| format!("{who}: {e}"))?;
     if !status.success() {
         let how = status.code().map_or_else(
             || "was killed by a signal".to_string(),
             |c| format!("exited with status {c}"),
         );
-        return Err(format!("{who} {how}; {}", tail(&err)));
+        let limit = settings
+            .limits
+            .hit(status, &String::from_utf8_lossy(&err))
+            .map(|l| format!(": {l}"))
+            .unwrap_or_default();
+        return Err(format!("{who} {how}{limit}; {}", tail(&err)));
     }
     read_answer(&out, req).map_err(|e| format!("{who} {e}; {}", tail(&err)))
 }
@@ -461,7 +602,7 @@ mod tests {
 
     #[tokio::test]
     async fn registration_refuses_what_is_not_a_program() {
-        let t = Duration::from_secs(1);
+        let t = Settings::default();
         let plain = std::env::temp_dir().join(format!("naofarm-plain-{}", std::process::id()));
         std::fs::write(&plain, "#!/bin/sh\n").expect("a temporary file");
         let not_executable = format!("x={}", plain.display());
@@ -472,7 +613,7 @@ mod tests {
             ("x=/tmp", "not a file"),
             (not_executable.as_str(), "not executable"),
         ] {
-            let e = Programs::register(&[spec.to_string()], t)
+            let e = Programs::register(&[spec.to_string()], t.clone())
                 .await
                 .expect_err(spec);
             assert!(e.to_string().contains(why), "{e} should say {why}");
@@ -480,17 +621,19 @@ mod tests {
         let _ = std::fs::remove_file(&plain);
         let twice = ["x=/bin/true".to_string(), "x=/bin/false".to_string()];
         assert_eq!(
-            Programs::register(&twice, t).await.expect_err("twice"),
+            Programs::register(&twice, t.clone())
+                .await
+                .expect_err("twice"),
             ProgramError::Twice("x".into())
         );
-        let ok = Programs::register(&["t=/bin/true".to_string()], t)
+        let ok = Programs::register(&["t=/bin/true".to_string()], t.clone())
             .await
             .expect("/bin/true is a program");
         let p = ok.get("t").expect("registered");
         assert_ne!(p.fingerprint(1), p.fingerprint(2));
         // Another build under the same name is another fingerprint: a run
         // never mixes them.
-        let other = Programs::register(&["t=/bin/false".to_string()], t)
+        let other = Programs::register(&["t=/bin/false".to_string()], t.clone())
             .await
             .expect("/bin/false is a program");
         let q = other.get("t").expect("registered");

@@ -7,10 +7,15 @@
 //! priority). The event loop never waits for a trial or a slot: requests,
 //! grants, finished trials, heartbeats and the shutdown signal are all events.
 //! A granted trial beyond the worker's limits (duration, physics, model) is
-//! given back at once with the reason. On shutdown the worker stops asking,
-//! gives back every trial it holds (the coordinators offer them to other
-//! workers at once, without waiting for a lease), drops its liveliness token
-//! and returns; threads still computing are abandoned with the process.
+//! given back at once with the reason. While it runs a trial it names the
+//! trial's dispatch in its heartbeat to the run, which renews the trial's
+//! lease; a trial granted again while it runs is not started twice (its
+//! answer carries the newest dispatch). On shutdown the worker stops
+//! asking, asks its programs to stop (SIGTERM, then SIGKILL after the
+//! grace), gives back every trial it holds (the coordinators offer them to
+//! other workers at once, without waiting for a lease), removes its scratch
+//! space, drops its liveliness token and returns; threads still computing
+//! NAO trials are abandoned with the process.
 
 use std::{
     collections::{BTreeMap, BTreeSet},
@@ -114,6 +119,9 @@ pub enum WorkerError {
     /// The fingerprint's probe trials could not run.
     #[error("the fingerprint's probe: {0}")]
     Probe(String),
+    /// The programs' scratch space could not be made.
+    #[error("the programs' scratch space: {0}")]
+    Scratch(String),
 }
 
 fn zerr(e: impl std::fmt::Display) -> WorkerError {
@@ -186,7 +194,7 @@ fn panic_text(p: Box<dyn std::any::Any + Send>) -> String {
 /// A trial's key in the worker: (run id, iteration, trial).
 type Held = (String, u64, u32);
 
-fn give_back(req: &TrialRequest, worker: &str, reason: String, refused: bool) -> TrialFailure {
+fn give_back(req: &TrialRequest, worker: &str, reason: &str, refused: bool) -> TrialFailure {
     TrialFailure {
         run: req.run.clone(),
         iteration: req.iteration,
@@ -194,7 +202,7 @@ fn give_back(req: &TrialRequest, worker: &str, reason: String, refused: bool) ->
         seed: req.seed,
         dispatch: req.dispatch,
         worker: worker.to_string(),
-        reason,
+        reason: protocol::wire::fit_reason(reason),
         refused,
     }
 }
@@ -223,22 +231,27 @@ async fn run_one(
     (result, started.elapsed().as_secs_f64())
 }
 
-/// Runs one trial of a registered program in `slot`: its measurement, or why it failed.
+/// Runs one trial of a registered program in a slot of the host's: its
+/// measurement, or why it failed.
 async fn run_program(
     program: crate::program::Program,
     req: TrialRequest,
-    slot: u32,
-    scratch: std::path::PathBuf,
-    timeout: Duration,
+    run_dir: std::path::PathBuf,
+    settings: crate::program::Settings,
+    stop: tokio_util::sync::CancellationToken,
 ) -> (Result<crate::Measurement, String>, f64) {
     let started = Instant::now();
-    let r = crate::program::run(&program, &req, slot, &scratch, timeout).await;
+    let r = match crate::job::Slot::claim() {
+        Ok(slot) => {
+            let dir = run_dir.join(format!("slot-{}", slot.n));
+            let r = crate::program::run(&program, &req, slot.n, &dir, &settings, &stop).await;
+            // The slot's scratch is kept for the run's next trial in it.
+            drop(slot);
+            r
+        }
+        Err(e) => Err(format!("no slot for program `{}`: {e}", program.name)),
+    };
     (r, started.elapsed().as_secs_f64())
-}
-
-/// The slot directory of a worker's program trials.
-fn slot_dir(root: &std::path::Path, slot: u32) -> std::path::PathBuf {
-    root.join(format!("slot-{slot}"))
 }
 
 /// A grant as this worker reads it.
@@ -313,8 +326,8 @@ async fn ask(session: Session, work_key: String, req: WorkRequest) -> Result<Gra
 enum Done {
     /// A grant (or its failure) for (run, asked).
     Grant(String, u32, Result<Grant, String>),
-    /// A trial ended.
-    Trial(TrialRequest, Result<crate::Measurement, String>, f64),
+    /// A trial ended: (run, iteration, trial), what it gave, its wall time.
+    Trial(Held, Result<crate::Measurement, String>, f64),
 }
 
 /// Serves trials until `shutdown` turns true, then gives back what it holds,
@@ -340,7 +353,24 @@ pub async fn serve(
         .declare_token(keys::worker(&prefix, &id))
         .await
         .map_err(zerr)?;
+    // The trial programs' scratch space: this worker's own, removed when it
+    // stops (or by the next worker on this host, if this one is killed).
+    let scratch = crate::job::Scratch::create("worker", &id)
+        .map_err(|e| WorkerError::Scratch(e.to_string()))?;
+    let containment = if cfg.programs.by_name.is_empty() {
+        String::new()
+    } else {
+        crate::job::Host::get().describe()
+    };
     tracing::info!(worker = %id, slots = cfg.slots, fingerprint = %protocol::wire::show_fingerprint(fingerprint), "worker ready");
+    if !containment.is_empty() {
+        tracing::info!(worker = %id, containment, "trial programs run as jobs");
+        if !crate::job::Host::get().contains_daemons() {
+            tracing::warn!("neither a cgroup nor a PID namespace is available here: a process a program detaches (setsid) can outlive its trial");
+        }
+    }
+    let mut programs = cfg.programs.clone();
+    let stop_programs = tokio_util::sync::CancellationToken::new();
     let mut share = Share::new(uuid.as_u64_pair().0);
     let mut held: BTreeMap<Held, TrialRequest> = BTreeMap::new();
     let mut asking: u32 = 0;
@@ -351,23 +381,17 @@ pub async fn serve(
     let mut tell = tokio::time::interval(STATUS_EVERY);
     tell.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let status_key = keys::worker_status(&prefix, &id);
-    // The trial programs' scratch space: this worker's own, removed when it stops.
-    let scratch = std::env::temp_dir().join(format!("naofarm-worker-{id}"));
-    // Each run's program (from its adverts), and the slot each program trial holds.
+    // Each run's program (from its adverts), and the task of each program trial.
     let mut run_program_of: BTreeMap<String, String> = BTreeMap::new();
-    let mut program_slots: BTreeMap<Held, (u32, tokio::task::JoinHandle<()>)> = BTreeMap::new();
+    let mut program_tasks: BTreeMap<Held, tokio::task::JoinHandle<()>> = BTreeMap::new();
     // The fingerprint this worker asks and answers `run` with.
-    let fingerprint_for = |program: Option<&String>| {
+    let fingerprint_for = |programs: &crate::program::Programs, program: Option<&String>| {
         program
-            .and_then(|p| cfg.programs.get(p))
+            .and_then(|p| programs.get(p))
             .map_or(fingerprint, |p| p.fingerprint(fingerprint))
     };
     let host = host_name();
     let version = env!("CARGO_PKG_VERSION").to_string();
-    // When this worker last said anything to each run (a request, an
-    // outcome): a heartbeat goes only to runs it holds trials of and has not
-    // spoken to within a heartbeat.
-    let mut spoke: BTreeMap<String, Instant> = BTreeMap::new();
     loop {
         tokio::select! {
             s = adverts.recv_async() => {
@@ -376,7 +400,7 @@ pub async fn serve(
                     Ok(ad) => {
                         share.advert(&ad, tokio::time::Instant::now());
                         if let Some(p) = &ad.program {
-                            if cfg.programs.get(p).is_none() {
+                            if programs.get(p).is_none() {
                                 let why = format!("this worker has not registered a program named `{p}`");
                                 if share.unservable(&ad.id, &why) {
                                     tracing::info!(run = %ad.id, %why, "this worker will not serve the run");
@@ -434,52 +458,86 @@ pub async fn serve(
                             share.done(&run, None);
                             summary.refused += 1;
                             let fkeys = FleetKeys::new(&prefix, &req.run);
-                            put_message(&session, &fkeys.failures(), &give_back(&req, &id, why, true)).await;
+                            put_message(&session, &fkeys.failures(), &give_back(&req, &id, &why, true)).await;
                             continue;
                         }
-                        tracing::debug!(run, iteration = req.iteration, trial = req.trial, "trial started");
                         let key = (req.run.clone(), req.iteration, req.trial);
+                        if let Some(running) = held.get_mut(&key) {
+                            // Granted again while it runs here (its lease
+                            // passed while this worker was not heard): not
+                            // run twice; its answer carries the newest dispatch.
+                            tracing::info!(run, iteration = req.iteration, trial = req.trial, "a trial running here was granted again");
+                            running.dispatch = req.dispatch;
+                            share.done(&run, None);
+                            continue;
+                        }
+                        let program = match req.program.as_ref().and_then(|p| programs.get(p)) {
+                            Some(p) => match p.refreshed().await {
+                                None => Some(p.clone()),
+                                Some(changed) => {
+                                    let why = match changed {
+                                        Ok(new) => {
+                                            let why = format!(
+                                                "program `{}` changed on disk since this worker registered it: this worker now serves its new build (fingerprint {}), and a run takes one build only",
+                                                new.name,
+                                                show_fingerprint(new.fingerprint(fingerprint))
+                                            );
+                                            programs.by_name.insert(new.name.clone(), new);
+                                            why
+                                        }
+                                        Err(e) => format!("program `{}` is no longer runnable: {e}", p.name),
+                                    };
+                                    tracing::warn!(run, %why, "giving the trial back");
+                                    share.done(&run, None);
+                                    summary.refused += 1;
+                                    let fkeys = FleetKeys::new(&prefix, &req.run);
+                                    put_message(&session, &fkeys.failures(), &give_back(&req, &id, &why, true)).await;
+                                    continue;
+                                }
+                            },
+                            None => None,
+                        };
+                        tracing::debug!(run, iteration = req.iteration, trial = req.trial, "trial started");
                         held.insert(key.clone(), req.clone());
                         let tx = tx.clone();
                         let min_trial = cfg.min_trial;
-                        if let Some(program) = req.program.as_ref().and_then(|p| cfg.programs.get(p)) {
-                            // The lowest slot no program trial holds.
-                            let slot = (0..).find(|s| !program_slots.values().any(|(u, _)| u == s)).unwrap_or(0);
-                            let (program, dir, timeout) = (program.clone(), slot_dir(&scratch, slot), cfg.programs.timeout);
+                        if let Some(program) = program {
+                            let run_dir = scratch.path().join(&req.run);
+                            let settings = programs.settings.clone();
+                            let stop = stop_programs.clone();
+                            let k = key.clone();
                             let task = tokio::spawn(async move {
-                                let (r, wall) = run_program(program, req.clone(), slot, dir, timeout).await;
-                                let _ = tx.send(Done::Trial(req, r, wall));
+                                let (r, wall) = run_program(program, req, run_dir, settings, stop).await;
+                                let _ = tx.send(Done::Trial(k, r, wall));
                             });
-                            program_slots.insert(key, (slot, task));
+                            program_tasks.insert(key, task);
                             continue;
                         }
                         tokio::spawn(async move {
-                            let (r, wall) = run_one(req.clone(), min_trial).await;
-                            let _ = tx.send(Done::Trial(req, r, wall));
+                            let (r, wall) = run_one(req, min_trial).await;
+                            let _ = tx.send(Done::Trial(key, r, wall));
                         });
                     }
                     summary.most_held = summary.most_held.max(u32::try_from(held.len()).unwrap_or(u32::MAX));
                 }
-                Done::Trial(req, result, wall) => {
-                    let key = (req.run.clone(), req.iteration, req.trial);
-                    program_slots.remove(&key);
-                    if held.remove(&key).is_none() {
+                Done::Trial(key, result, wall) => {
+                    program_tasks.remove(&key);
+                    let Some(req) = held.remove(&key) else {
                         continue; // given back already (shutdown)
-                    }
+                    };
                     share.done(&req.run, Some(wall));
                     let fkeys = FleetKeys::new(&prefix, &req.run);
                     match result {
                         Ok(m) => {
-                            let fp = fingerprint_for(req.program.as_ref());
+                            let fp = fingerprint_for(&programs, req.program.as_ref());
                             let mut o = TrialOutcome::answer(&req, id.clone(), fp, m, wall);
                             crate::fault::tamper(&mut o);
                             put_message(&session, &fkeys.outcomes(), &o).await;
-                            spoke.insert(req.run.clone(), Instant::now());
                             summary.trials += 1;
                         }
                         Err(reason) => {
                             tracing::error!(%reason, iteration = req.iteration, trial = req.trial, "trial could not run; reporting it");
-                            put_message(&session, &fkeys.failures(), &give_back(&req, &id, reason, false)).await;
+                            put_message(&session, &fkeys.failures(), &give_back(&req, &id, &reason, false)).await;
                             summary.refused += 1;
                         }
                     }
@@ -487,23 +545,40 @@ pub async fn serve(
             },
             _ = beat.tick() => {
                 share.expire(tokio::time::Instant::now());
+                // Every run this worker runs trials of hears which, by
+                // dispatch id: their leases follow the work.
                 let runs: BTreeSet<&String> = held.keys().map(|(r, _, _)| r).collect();
-                let p = WorkerPresence {
-                    worker: id.clone(),
-                    slots: cfg.slots,
-                    busy: u32::try_from(held.len()).unwrap_or(u32::MAX).min(cfg.slots),
-                    version: version.clone(),
-                };
-                let quiet: Vec<&String> = runs
-                    .into_iter()
-                    .filter(|r| spoke.get(*r).is_none_or(|t| t.elapsed() >= cfg.heartbeat))
-                    .collect();
-                for run in quiet {
+                for run in runs {
+                    let running: Vec<u64> = held
+                        .iter()
+                        .filter(|((r, _, _), _)| r == run)
+                        .map(|(_, req)| req.dispatch)
+                        .take(cfg.slots as usize)
+                        .collect();
+                    let p = WorkerPresence {
+                        worker: id.clone(),
+                        slots: cfg.slots,
+                        busy: u32::try_from(held.len()).unwrap_or(u32::MAX).min(cfg.slots),
+                        version: version.clone(),
+                        running,
+                    };
                     put_message(&session, &FleetKeys::new(&prefix, run).presence(), &p).await;
-                    spoke.insert(run.clone(), Instant::now());
                 }
-                spoke.retain(|r, _| held.keys().any(|(h, _, _)| h == r));
-                run_program_of.retain(|r, _| share.knows(r));
+                // A run that ended (no longer advertised) leaves no scratch here.
+                let ended: Vec<String> = run_program_of
+                    .keys()
+                    .filter(|r| !share.knows(r) && !held.keys().any(|(h, _, _)| h == *r))
+                    .cloned()
+                    .collect();
+                for r in ended {
+                    run_program_of.remove(&r);
+                    let dir = scratch.path().join(&r);
+                    if let Err(e) = std::fs::remove_dir_all(&dir) {
+                        if e.kind() != std::io::ErrorKind::NotFound {
+                            tracing::warn!(dir = %dir.display(), error = %e, "a run's scratch space was not removed");
+                        }
+                    }
+                }
             }
             _ = tell.tick() => {
                 let mut runs: BTreeMap<String, u32> = BTreeMap::new();
@@ -520,7 +595,8 @@ pub async fn serve(
                     runs: runs.into_iter().collect(),
                     trials: summary.trials,
                     refused: summary.refused,
-                    programs: cfg.programs.by_name.keys().cloned().collect(),
+                    programs: programs.by_name.keys().cloned().collect(),
+                    containment: containment.clone(),
                 };
                 put_status(&session, &status_key, &st).await;
             }
@@ -538,7 +614,7 @@ pub async fn serve(
                 asking += want;
                 let program = run_program_of
                     .get(&run)
-                    .filter(|p| cfg.programs.get(p).is_some());
+                    .filter(|p| programs.get(p).is_some());
                 let req = WorkRequest {
                     worker: id.clone(),
                     want,
@@ -546,11 +622,10 @@ pub async fn serve(
                     busy,
                     max_duration_s: cfg.max_duration_s,
                     version: version.clone(),
-                    fingerprint: fingerprint_for(program),
+                    fingerprint: fingerprint_for(&programs, program),
                     program: program.cloned(),
                 };
                 let key = FleetKeys::new(&prefix, &run).work();
-                spoke.insert(run.clone(), Instant::now());
                 let session = session.clone();
                 let tx = tx.clone();
                 tokio::spawn(async move {
@@ -560,9 +635,11 @@ pub async fn serve(
             }
         }
     }
-    // Stop asking; give back what we hold, so it is run elsewhere at once
-    // (grants still on their way included: each ask times out within 2 s).
+    // Stop asking; ask the programs to stop (SIGTERM, SIGKILL after the
+    // grace); give back what we hold, so it is run elsewhere at once (grants
+    // still on their way included: each ask times out within 2 s).
     drop(adverts);
+    stop_programs.cancel();
     let late = tokio::time::Instant::now() + Duration::from_secs(3);
     while asking > 0 {
         match tokio::time::timeout_at(late, rx.recv()).await {
@@ -581,25 +658,22 @@ pub async fn serve(
     }
     for ((run, _, _), req) in std::mem::take(&mut held) {
         summary.refused += 1;
-        let f = give_back(&req, &id, "the worker is stopping".into(), true);
+        let f = give_back(&req, &id, "the worker is stopping", true);
         put_message(&session, &FleetKeys::new(&prefix, &run).failures(), &f).await;
     }
     if let Err(e) = token.undeclare().await {
         tracing::warn!(error = %e, "undeclaring the liveliness token failed");
     }
-    // Programs still running stop now, with every process they started
-    // (dropping a trial's task kills its process group), before their
-    // scratch space goes.
-    for (_, (_, task)) in std::mem::take(&mut program_slots) {
-        task.abort();
-        let _ = task.await;
-    }
-    // Only this worker ever wrote there (its id is in the name).
-    if scratch.exists() {
-        if let Err(e) = std::fs::remove_dir_all(&scratch) {
-            tracing::warn!(dir = %scratch.display(), error = %e, "the programs' scratch space was not removed");
+    // Programs asked to stop end within their grace (then they are killed
+    // whole), before their scratch space goes.
+    let bound = programs.settings.grace + Duration::from_secs(5);
+    for (_, task) in std::mem::take(&mut program_tasks) {
+        if tokio::time::timeout(bound, task).await.is_err() {
+            tracing::warn!("a program trial did not end within its grace");
         }
     }
+    // Only this worker ever wrote there (its id is in the name).
+    drop(scratch);
     tracing::info!(worker = %id, trials = summary.trials, "worker stopped");
     Ok(summary)
 }

@@ -201,3 +201,29 @@ async fn only_the_dispatch_in_flight_from_its_worker_answers() {
         "once"
     );
 }
+
+/// A worker that keeps naming a dispatch keeps its trial past any number of
+/// leases; one it stops naming comes back when its lease passes.
+#[tokio::test(start_paused = true)]
+async fn a_running_trial_named_by_its_worker_keeps_its_lease() {
+    let mut s = sched();
+    s.enqueue((0, 0), Instant::now());
+    s.enqueue((0, 1), Instant::now());
+    assert_eq!(take(&mut s, "a", 2, &none), [(0, 0), (0, 1)]);
+    let kept = s.dispatch_of((0, 0)).unwrap();
+    for _ in 0..3 {
+        advance(LEASE / 2).await;
+        s.worker_seen("a", Some(2), Instant::now());
+        s.renew("a", &[kept], Instant::now());
+        let t = s.tick(Instant::now());
+        assert!(t.expired.iter().all(|(t, _)| *t != (0, 0)), "{t:?}");
+    }
+    assert_eq!(s.holder((0, 0)), Some("a"), "renewed past three leases");
+    assert_eq!(s.holder((0, 1)), None, "not named: its lease passed");
+    // Another worker naming the dispatch renews nothing.
+    s.worker_seen("b", Some(1), Instant::now());
+    s.renew("b", &[kept], Instant::now());
+    advance(LEASE).await;
+    s.worker_seen("a", Some(2), Instant::now());
+    assert_eq!(s.tick(Instant::now()).expired, [((0, 0), "a".to_string())]);
+}

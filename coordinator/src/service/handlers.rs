@@ -46,6 +46,7 @@ pub(super) fn fingerprint_fits(
     };
     if req.fingerprint == ours {
         st.matched = true;
+        st.mismatched.remove(&req.worker);
         return Ok(None);
     }
     let why = format!(
@@ -62,7 +63,7 @@ pub(super) fn fingerprint_fits(
     {
         tracing::warn!(worker = %req.worker, "{why}");
     }
-    no_worker_fits(st)?;
+    no_worker_fits(st, true)?;
     Ok(Some(why))
 }
 
@@ -81,18 +82,26 @@ fn program_misfit(exp: &protocol::Experiment, req: &WorkRequest) -> Option<Strin
     }
 }
 
-/// A resumed run whose every live worker asked with another fingerprint
-/// than the journaled one (and none with it) ends at once: its history
-/// could not go on with the same bits.
-pub(super) fn no_worker_fits(st: &State) -> Result<(), ServiceError> {
+/// A run whose every live worker asked with another fingerprint than the
+/// run's ends at once: its history could not go on with the same bits. A
+/// resumed run ends so before any worker of its fingerprint served it; a
+/// served run when a worker just asked with another (its program was
+/// rebuilt under it), never only because a worker left.
+pub(super) fn no_worker_fits(st: &State, asked: bool) -> Result<(), ServiceError> {
     let Some(ours) = st.facts.fingerprint else {
         return Ok(());
     };
-    if st.journaled_fingerprint
-        && !st.matched
-        && !st.mismatched.is_empty()
-        && st.live.iter().all(|w| st.mismatched.contains_key(w))
-    {
+    let all_other =
+        !st.mismatched.is_empty() && st.live.iter().all(|w| st.mismatched.contains_key(w));
+    // A resumed run no worker of its fingerprint served yet; or, when a
+    // worker just asked with another fingerprint, a run whose every live
+    // worker now has another (a program rebuilt under its workers).
+    let ends = if st.matched {
+        asked && !st.live.is_empty()
+    } else {
+        st.journaled_fingerprint
+    };
+    if all_other && ends {
         let theirs = st
             .mismatched
             .iter()

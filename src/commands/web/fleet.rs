@@ -309,6 +309,7 @@ mod tests {
             trials: 3,
             refused: 0,
             programs: vec![],
+            containment: String::new(),
         }
     }
 
