@@ -759,6 +759,69 @@ fn a_stopping_worker_stops_its_programs_and_what_they_started() {
     assert!(log.contains("worker stopped"), "{log}");
 }
 
+/// SIGTERM to a worker whose program traps it: the program is asked
+/// (SIGTERM) and stops within its grace, what it started goes with it, and
+/// the worker removes its scratch space before it exits.
+#[test]
+fn a_worker_asked_to_stop_asks_its_program_and_leaves_nothing_behind() {
+    let (dir, _out, c) = program_run("program-term");
+    let (tmp, records) = (dir.join("tmp"), dir.join("records"));
+    for d in [&tmp, &records] {
+        std::fs::create_dir_all(d).unwrap();
+    }
+    let marker = format!("naofarm-test-marker-{}", uuid::Uuid::new_v4());
+    let mut cmd = naofarm();
+    cmd.args(["worker", "--connect", &format!("tcp/127.0.0.1:{}", c.port)])
+        .args(["--slots", "1", "--program-grace-s", "30"])
+        .arg("--program")
+        .arg(format!(
+            "toy={}",
+            root().join("tests/programs/job").display()
+        ))
+        .args(["--program-env", "NAOFARM_TEST_JOB=trap"])
+        .arg("--program-env")
+        .arg(format!("NAOFARM_TEST_DIR={}", records.display()))
+        .arg("--program-env")
+        .arg(format!("NAOFARM_TEST_MARKER={marker}"))
+        .env("TMPDIR", &tmp)
+        .stdout(Stdio::null());
+    let mut w = Proc::spawn_logged(&mut cmd, "worker");
+    let alive = || {
+        std::fs::read_dir("/proc")
+            .unwrap()
+            .flatten()
+            .filter(|e| {
+                std::fs::read(e.path().join("cmdline"))
+                    .is_ok_and(|c| String::from_utf8_lossy(&c).contains(&marker))
+            })
+            .count()
+    };
+    util::wait_for("the program to start", TIMEOUT, || {
+        records.join("started").exists().then_some(())
+    });
+    assert!(alive() >= 3, "the program and its two children run");
+    signal(&w.child, "-TERM");
+    let status = w.child.wait().unwrap();
+    assert!(status.success(), "{status}: {}", w.stderr());
+    let terminated = std::fs::read_to_string(records.join("terminated")).unwrap_or_default();
+    assert_eq!(
+        terminated.lines().count(),
+        1,
+        "the program was asked, not killed"
+    );
+    util::wait_for(
+        "the program's processes to be gone",
+        Duration::from_secs(10),
+        || (alive() == 0).then_some(()),
+    );
+    let left: Vec<_> = std::fs::read_dir(&tmp)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name())
+        .collect();
+    assert!(left.is_empty(), "left in the worker's TMPDIR: {left:?}");
+}
+
 fn outcome_worker(r: &Record) -> Option<String> {
     if let Record::Outcome { worker, .. } = r {
         Some(worker.clone())

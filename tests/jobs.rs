@@ -398,3 +398,42 @@ fn ctrl_c_on_run_stops_its_programs_and_their_children() {
     assert_eq!(farm.lines("terminated").len(), 1);
     farm.assert_clean();
 }
+
+#[test]
+fn ctrl_c_on_report_stops_its_programs_and_their_children() {
+    let farm = Farm::new("report-sigint");
+    let (code, _, err) = finish(
+        farm.run(&job_program(), "slow", 1, 2, 2)
+            .args(["--program-env", "NAOFARM_TEST_SLEEP=0"]),
+    );
+    assert_eq!(code, Some(0), "{err}");
+    let mut report = naofarm()
+        .args(["report", "--trials", "4"])
+        .arg(farm.out())
+        .arg("--program")
+        .arg(format!("job={}", job_program().display()))
+        .args(["--program-env", "NAOFARM_TEST_JOB=trap"])
+        .arg("--program-env")
+        .arg(format!("NAOFARM_TEST_DIR={}", farm.records().display()))
+        .args([
+            "--program-env",
+            &format!("NAOFARM_TEST_MARKER={}", farm.marker),
+        ])
+        .env("TMPDIR", farm.tmp())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    wait_for("the report's program to start", WITHIN, || {
+        (!farm.lines("started").is_empty()).then_some(())
+    });
+    let sent = Command::new("kill")
+        .args(["-INT", &report.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let status = wait_for_quietly(&mut report, WITHIN).expect("the report stopped");
+    assert_eq!(status.code(), Some(1));
+    assert_eq!(farm.lines("terminated").len(), farm.lines("started").len());
+    farm.assert_clean();
+}

@@ -560,3 +560,34 @@ fn over_tls_a_watchers_page_sees_the_fleet_and_a_controllers_acts() {
     let status: Value = serde_json::from_str(&body).unwrap();
     assert_eq!(status["state"], "paused");
 }
+
+/// SIGTERM to `web` while a page's live feed is open: the feed ends and
+/// the page server exits, instead of waiting for the page to go.
+#[test]
+fn web_stops_on_sigterm_with_a_page_open() {
+    use std::io::BufRead;
+    let dir = scratch("web-term");
+    let (_router, ep) = router(&dir, "tcp/127.0.0.1:0");
+    let (mut w, page) = web(&dir, &ep, &[]);
+    let mut r = agent().get(format!("{page}/events")).call().unwrap();
+    let mut feed = std::io::BufReader::new(r.body_mut().as_reader());
+    let mut first = String::new();
+    while !first.starts_with("data:") {
+        first.clear();
+        assert!(
+            feed.read_line(&mut first).unwrap() > 0,
+            "the feed ended at once"
+        );
+    }
+    sigterm(&w);
+    let status = util::wait_for("web to stop with its feed open", TIMEOUT, || {
+        w.child.try_wait().unwrap()
+    });
+    assert!(status.success(), "{status}: {}", w.stderr());
+    // What is left of the feed ends: no more events after the stop.
+    let rest: Vec<String> = feed.lines().map_while(Result::ok).collect();
+    assert!(
+        rest.iter().filter(|l| l.starts_with("data:")).count() <= 1,
+        "{rest:?}"
+    );
+}

@@ -85,6 +85,9 @@ struct Shared {
     asking: Mutex<std::collections::BTreeSet<String>>,
     /// Finished runs' tables and walks, by (run id, what).
     computed: Mutex<BTreeMap<(String, String), Computed>>,
+    /// Turns true on SIGINT or SIGTERM: the live feeds end, so the server's
+    /// graceful shutdown does not wait for an open page.
+    stopping: tokio::sync::watch::Receiver<bool>,
 }
 
 impl Shared {
@@ -145,6 +148,7 @@ pub fn web(a: &WebArgs) -> Result<(), Failure> {
             http,
             asking: Mutex::new(std::collections::BTreeSet::new()),
             computed: Mutex::new(BTreeMap::new()),
+            stopping: shutdown.clone(),
         });
         let follow = tokio::spawn(follow(session.clone(), shared.clone()));
         let app = routes(shared.clone());
@@ -565,9 +569,19 @@ async fn events(
 ) -> Sse<impl futures_util::Stream<Item = Result<Event, std::convert::Infallible>>> {
     let rx = sh.changed.subscribe();
     let stream = futures_util::stream::unfold((sh, rx, true), |(sh, mut rx, first)| async move {
+        let mut stopping = sh.stopping.clone();
+        if *stopping.borrow() {
+            return None;
+        }
         if !first {
-            tokio::time::sleep(FEED_EVERY).await;
-            rx.changed().await.ok()?;
+            let next = async {
+                tokio::time::sleep(FEED_EVERY).await;
+                rx.changed().await
+            };
+            tokio::select! {
+                changed = next => changed.ok()?,
+                _ = stopping.wait_for(|s| *s) => return None,
+            }
         }
         rx.mark_unchanged();
         let data = sh.fleet().snapshot(Instant::now()).to_string();

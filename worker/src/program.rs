@@ -435,6 +435,9 @@ pub async fn run(
     stop: &tokio_util::sync::CancellationToken,
 ) -> Result<Measurement, String> {
     let who = format!("program `{}`", program.name);
+    if stop.is_cancelled() {
+        return Err(format!("the worker is stopping; {who} was not started"));
+    }
     let input = ProgramTrial {
         run: req.run.clone(),
         iteration: req.iteration,
