@@ -8,17 +8,23 @@
 //!
 //! - **a cgroup v2 per job** where this process may create one beside
 //!   itself (as root, or in a cgroup delegated to it: systemd's
-//!   `Delegate=yes`), killed with `cgroup.kill`;
-//! - **a PID namespace per job** (util-linux `unshare`, as root or in a user
-//!   namespace of its own): the job's init is a shell that runs the program,
-//!   and when it ends the kernel kills every process left in the namespace,
-//!   whatever it did (`setsid`, a double fork);
+//!   `Delegate=yes`), killed with `cgroup.kill`; a watcher process of this
+//!   process's, told by a parent-death signal, kills them all when this
+//!   process dies, however it dies;
+//! - else **a PID namespace per job** (util-linux `unshare`, as root or in
+//!   a user namespace of its own, with its own `/proc`): the job's init is
+//!   a shell that runs the program, and when it ends the kernel kills every
+//!   process left in the namespace, whatever it did (`setsid`, a double
+//!   fork);
 //! - always **the job's process group**, signalled whole, and a
-//!   **parent-death signal** (util-linux `setpriv --pdeathsig`): a job dies
-//!   with the worker thread that started it, also when the worker is killed
-//!   by SIGKILL;
+//!   **parent-death signal** (util-linux `setpriv --pdeathsig`) on its first
+//!   process;
 //! - **limits** (address space, processes, file size, CPU seconds) set by
 //!   util-linux `prlimit` before the program starts.
+//!
+//! `NAOFARM_JOB_CONTAINMENT=pidns` or `=group` (read once, at run time)
+//! makes a host that allows a cgroup use the weaker mechanism instead: for
+//! tests of those hosts.
 //!
 //! [`Scratch`] is a directory held by a lock for its owner's life: a
 //! process that starts removes those whose owner is gone. [`Slot`] is a slot
@@ -71,6 +77,7 @@ impl Host {
     }
 
     fn detect() -> Self {
+        let weaker = std::env::var("NAOFARM_JOB_CONTAINMENT").ok();
         let sh = find("sh").unwrap_or_else(|| PathBuf::from("/bin/sh"));
         let runs = |argv: &[&std::ffi::OsStr]| {
             std::process::Command::new(argv[0])
@@ -94,13 +101,19 @@ impl Host {
         });
         let prlimit = find("prlimit")
             .filter(|p| runs(&[p.as_os_str(), "--core=0".as_ref(), "--".as_ref(), t]));
-        let pidns = find("unshare").and_then(|u| {
+        let cgroup = match weaker.as_deref() {
+            Some("pidns" | "group") => None,
+            _ => own_cgroup_dir().filter(|d| watch_cgroups(&sh, d)),
+        };
+        let wants_pidns = cgroup.is_none() && weaker.as_deref() != Some("group");
+        let pidns = find("unshare").filter(|_| wants_pidns).and_then(|u| {
             let flags: [&[&str]; 2] = [
-                &["--pid", "--fork", "--kill-child"],
+                &["--pid", "--mount-proc", "--fork", "--kill-child"],
                 &[
                     "--user",
                     "--map-current-user",
                     "--pid",
+                    "--mount-proc",
                     "--fork",
                     "--kill-child",
                 ],
@@ -116,7 +129,7 @@ impl Host {
             })
         });
         Self {
-            cgroup: own_cgroup_dir(),
+            cgroup,
             setpriv,
             prlimit,
             pidns,
@@ -196,6 +209,50 @@ fn own_cgroup_dir() -> Option<PathBuf> {
         let _ = std::fs::remove_dir(&dir);
         None
     }
+}
+
+/// Starts this process's cgroup watcher: a shell outside the jobs' cgroups
+/// and process groups that sleeps until this process dies (its
+/// parent-death signal, SIGTERM), then kills every job cgroup in `dir` and
+/// removes them. It is started from a thread that lives as long as the
+/// process, since the signal follows the thread that started it. Whether it
+/// runs.
+fn watch_cgroups(sh: &Path, dir: &Path) -> bool {
+    use std::os::unix::process::CommandExt;
+    const WATCH: &str = r#"trap 'kill $! 2>/dev/null
+for k in "$0"/job-*/cgroup.kill; do [ -e "$k" ] && echo 1 > "$k"; done
+for _ in 1 2 3 4 5 6 7 8 9 10; do rmdir "$0"/job-* "$0" 2>/dev/null; [ -d "$0" ] || exit 0; sleep 0.1; done
+exit 0' TERM
+while :; do sleep 86400 & wait $!; done"#;
+    let Some(setpriv) = find("setpriv") else {
+        return false;
+    };
+    let (sh, dir) = (sh.to_path_buf(), dir.to_path_buf());
+    let (tx, rx) = std::sync::mpsc::channel();
+    let spawned = std::thread::Builder::new()
+        .name("naofarm-cgroup-watch".into())
+        .spawn(move || {
+            let child = std::process::Command::new(setpriv)
+                .args(["--pdeathsig", "TERM", "--"])
+                .arg(&sh)
+                .args(["-c", WATCH])
+                .arg(&dir)
+                .env_clear()
+                .env("PATH", "/usr/local/bin:/usr/bin:/bin")
+                .stdin(Stdio::null())
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .process_group(0)
+                .spawn();
+            let _ = tx.send(child.is_ok());
+            // The watcher's signal comes when this thread ends: never
+            // before the process does.
+            loop {
+                std::thread::park();
+            }
+        })
+        .is_ok();
+    spawned && rx.recv().unwrap_or(false)
 }
 
 /// Kills and removes the job cgroups of naofarm processes that are gone.
