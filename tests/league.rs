@@ -1,4 +1,4 @@
-//! The league's own server on the farm: scripts/league/build.sh builds
+//! The league's own server on the farm: programs/league/build.sh builds
 //! SimSpark, rcssserver3d and UT Austin Villa's agent from the third-party
 //! sources (into a cache outside the clone: a machine that keeps its files
 //! builds once), and a farm run of the `league` program on the real server
@@ -28,7 +28,7 @@ fn league_program() -> PathBuf {
          with the SimSpark and UT Austin Villa tarballs)",
         source.display()
     );
-    let out = Command::new(root().join("scripts/league/build.sh"))
+    let out = Command::new(root().join("programs/league/build.sh"))
         .arg(&source)
         .output()
         .unwrap();
@@ -109,6 +109,36 @@ fn descendants(root: u32) -> Vec<(u32, String)> {
     found
 }
 
+/// The local addresses (as /proc/net/tcp writes them) of the TCP sockets
+/// process `pid` listens on.
+fn listeners_of(pid: u32) -> Vec<String> {
+    let mut inodes = std::collections::BTreeSet::new();
+    if let Ok(fds) = std::fs::read_dir(format!("/proc/{pid}/fd")) {
+        for fd in fds.flatten() {
+            if let Ok(link) = std::fs::read_link(fd.path()) {
+                let link = link.to_string_lossy().into_owned();
+                if let Some(i) = link
+                    .strip_prefix("socket:[")
+                    .and_then(|l| l.strip_suffix(']'))
+                {
+                    inodes.insert(i.to_string());
+                }
+            }
+        }
+    }
+    let mut found = Vec::new();
+    for table in ["/proc/net/tcp", "/proc/net/tcp6"] {
+        let text = std::fs::read_to_string(table).unwrap_or_default();
+        for line in text.lines().skip(1) {
+            let f: Vec<&str> = line.split_whitespace().collect();
+            if f.len() > 9 && f[3] == "0A" && inodes.contains(f[9]) {
+                found.push(f[1].to_string());
+            }
+        }
+    }
+    found
+}
+
 #[test]
 fn a_league_run_on_the_real_server_is_journaled_killed_and_resumed() {
     let program = league_program();
@@ -140,6 +170,20 @@ fn a_league_run_on_the_real_server_is_journaled_killed_and_resumed() {
             let d = descendants(pid);
             d.iter().any(|(_, n)| n == "rcssserver3d").then_some(d)
         },
+    );
+    // The server listens on loopback only.
+    let servers: Vec<u32> = in_flight
+        .iter()
+        .filter(|(_, n)| n == "rcssserver3d")
+        .map(|(p, _)| *p)
+        .collect();
+    let listens = util::wait_for("the server's listeners", Duration::from_secs(30), || {
+        let l: Vec<String> = servers.iter().flat_map(|p| listeners_of(*p)).collect();
+        (l.len() >= 2).then_some(l)
+    });
+    assert!(
+        listens.iter().all(|a| a.starts_with("0100007F:")),
+        "the server listens beyond loopback: {listens:?}"
     );
     first.kill().unwrap();
     first.wait().unwrap();

@@ -3,14 +3,14 @@
 
   1. the server's own sync-mode speed: one agent walking N walks of D s on
      one server (UT's own optimisation loop), seconds per walk;
-  2. the trial program alone (scripts/league/league-trial): one walk per
+  2. the trial program alone (programs/league/league-trial): one walk per
      start of the server and the agent, as the farm runs it, wall and CPU
      seconds per trial (CPU of the program and everything it started);
   3. the farm: `naofarm run` of experiments/league.toml cut to a few
      iterations, with W local workers (one slot each): trials per second,
      and per core.
 
-  scripts/league/bench.py PROGRAM [--naofarm BIN] [--walks N] [--trials N]
+  scripts/league-bench.py PROGRAM [--naofarm BIN] [--walks N] [--trials N]
       [--iterations N] [--workers W]
 
 PROGRAM is the league build's trial program (the last line build.sh prints).

@@ -2,7 +2,7 @@
 # Builds the league's server (SimSpark + rcssserver3d) and UT Austin Villa's
 # agent for naofarm's `league` trial program, into a cache outside the clone.
 #
-#   scripts/league/build.sh SOURCE [CACHE]
+#   programs/league/build.sh SOURCE [CACHE]
 #
 # SOURCE holds simspark-*rcssserver3d-*.tar.gz and utaustinvilla3d*.tar.gz
 # (as ../shared/third-party does), or those trees unpacked. CACHE defaults to
@@ -68,6 +68,12 @@ key="$({
     cat "$here"/patches/*.patch
 } | sha256sum | cut -c1-16)"
 prefix="$cache/$key"
+# One build of a key at a time: a second call waits for the first, then
+# finds it built. A worker's program is replaced by a rename, never
+# rewritten in place.
+mkdir -p "$cache"
+exec 9>"$cache/.lock-$key"
+flock 9
 # The trial program is copied on every call: it is not part of the build.
 install_trial() {
     mkdir -p "$prefix/bin"
