@@ -194,6 +194,37 @@ fn a_detached_child_neither_outlives_its_trial_nor_holds_back_its_answer() {
     }
 }
 
+/// The weaker mechanisms of hosts without a cgroup (a PID namespace) or
+/// without either (the worker as child subreaper) kill a detached child
+/// with its trial too.
+#[test]
+fn every_mechanism_kills_a_detached_child_with_its_trial() {
+    for mechanism in ["pidns", "group"] {
+        let farm = Farm::new(&format!("daemon-{mechanism}"));
+        let (code, stdout, err) = finish(
+            farm.run(&job_program(), "daemon-holding", 1, 1, 2)
+                .env("NAOFARM_JOB_CONTAINMENT", mechanism)
+                .env("RUST_LOG", "info"),
+        );
+        assert_eq!(code, Some(0), "{mechanism}: {err}");
+        let said = if mechanism == "pidns" {
+            "PID namespace"
+        } else {
+            "child subreaper"
+        };
+        assert!(
+            err.contains(said) && !err.contains("cgroup v2"),
+            "{mechanism}: {err}"
+        );
+        assert_eq!(
+            util::events(stdout.as_bytes()).decided.len(),
+            1,
+            "{mechanism}: {err}"
+        );
+        farm.assert_clean();
+    }
+}
+
 #[test]
 fn a_killed_run_leaves_no_program_running_and_the_next_start_sweeps_its_scratch() {
     let farm = Farm::new("killed");
@@ -309,7 +340,9 @@ fn a_program_sees_only_what_its_owner_gives_it() {
             "{v}"
         );
         let mut names: Vec<&str> = env.keys().map(String::as_str).collect();
-        names.retain(|n| !n.starts_with("NAOFARM_TEST_") && *n != "PASSED");
+        // NAOFARM_JOB marks a job's processes where the worker is their
+        // child subreaper (a host with neither a cgroup nor a PID namespace).
+        names.retain(|n| !n.starts_with("NAOFARM_TEST_") && !["PASSED", "NAOFARM_JOB"].contains(n));
         names.sort_unstable();
         // What the program's own launchers add aside: the shell's PWD and
         // SHLVL, Python's LC_CTYPE, a pyenv shim's PYENV_*.

@@ -16,6 +16,10 @@
 //!   a shell that runs the program, and when it ends the kernel kills every
 //!   process left in the namespace, whatever it did (`setsid`, a double
 //!   fork);
+//! - else **the job's process group with this process as child
+//!   subreaper**: a process of the job that leaves the group (`setsid`) and
+//!   loses its parent comes to this process, which kills it with the job
+//!   (by the `NAOFARM_JOB` mark in its environment);
 //! - always **the job's process group**, signalled whole, and a
 //!   **parent-death signal** (util-linux `setpriv --pdeathsig`) on its first
 //!   process;
@@ -66,6 +70,9 @@ pub struct Host {
     pidns: Option<Vec<OsString>>,
     /// The shell, for joining a cgroup and for a namespace's init.
     sh: PathBuf,
+    /// Whether this process is its jobs' child subreaper (neither a cgroup
+    /// nor a PID namespace).
+    subreaper: bool,
 }
 
 static HOST: OnceLock<Host> = OnceLock::new();
@@ -128,7 +135,11 @@ impl Host {
                 runs(&probe).then_some(argv)
             })
         });
+        let subreaper = cgroup.is_none()
+            && pidns.is_none()
+            && nix::sys::prctl::set_child_subreaper(true).is_ok();
         Self {
+            subreaper,
             cgroup,
             setpriv,
             prlimit,
@@ -149,6 +160,9 @@ impl Host {
             parts.push("PID namespace");
         }
         parts.push("process group");
+        if self.subreaper {
+            parts.push("child subreaper");
+        }
         if self.setpriv.is_some() {
             parts.push("parent-death signal");
         }
@@ -172,6 +186,13 @@ fn find(name: &str) -> Option<PathBuf> {
     std::env::split_paths(&path)
         .map(|d| d.join(name))
         .find(|p| p.is_file())
+}
+
+/// The parent of process `pid`, if it lives.
+fn parent(pid: u32) -> Option<u32> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    let rest = &stat[stat.rfind(')')? + 1..];
+    rest.split_whitespace().nth(1)?.parse().ok()
 }
 
 /// When process `pid` started (clock ticks after boot), if it lives.
@@ -408,6 +429,9 @@ pub struct Job {
     pub child: tokio::process::Child,
     pgid: Option<Pid>,
     cgroup: Option<PathBuf>,
+    /// The `NAOFARM_JOB=…` mark of its processes' environment (this
+    /// process a child subreaper only).
+    mark: Option<String>,
 }
 
 /// Numbers the jobs of this process (their cgroups' names).
@@ -478,10 +502,15 @@ impl Job {
         }
         argv.push(program.as_os_str().into());
         argv.extend(args.iter().map(OsString::from));
+        let n = JOBS.fetch_add(1, Ordering::Relaxed);
+        let mark = host
+            .subreaper
+            .then(|| format!("{}-{n}", std::process::id()));
         let mut cmd = tokio::process::Command::new(&argv[0]);
         cmd.args(&argv[1..])
             .env_clear()
             .envs(env.iter().map(|(k, v)| (k, v)))
+            .envs(mark.iter().map(|m| ("NAOFARM_JOB", m)))
             .current_dir(dir)
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
@@ -505,6 +534,7 @@ impl Job {
             child,
             pgid,
             cgroup,
+            mark,
         })
     }
 
@@ -523,6 +553,57 @@ impl Job {
                 }
             }
         }
+        for p in self.orphans() {
+            let _ = nix::sys::signal::kill(p, sig);
+        }
+    }
+
+    /// The job's processes that left its group and came to this process
+    /// (its child subreaper): this process's children with the job's mark.
+    fn orphans(&self) -> Vec<Pid> {
+        let Some(mark) = &self.mark else {
+            return Vec::new();
+        };
+        let me = std::process::id();
+        let needle = format!("NAOFARM_JOB={mark}\0");
+        let Ok(procs) = std::fs::read_dir("/proc") else {
+            return Vec::new();
+        };
+        procs
+            .flatten()
+            .filter_map(|e| e.file_name().to_str()?.parse::<u32>().ok())
+            .filter(|&pid| parent(pid) == Some(me))
+            .filter(|pid| {
+                std::fs::read(format!("/proc/{pid}/environ"))
+                    .is_ok_and(|env| String::from_utf8_lossy(&env).contains(&needle))
+            })
+            .filter_map(|pid| i32::try_from(pid).ok().map(Pid::from_raw))
+            .collect()
+    }
+
+    /// Kills the job's orphans until none is left (a killed one's own
+    /// children come next), and reaps them: a second at most.
+    async fn reap_orphans(&self) {
+        use nix::sys::wait::{waitpid, WaitPidFlag, WaitStatus};
+        let mut killed: Vec<Pid> = Vec::new();
+        for _ in 0..100 {
+            for p in self.orphans() {
+                let _ = nix::sys::signal::kill(p, Signal::SIGKILL);
+                if !killed.contains(&p) {
+                    killed.push(p);
+                }
+            }
+            killed.retain(|p| {
+                matches!(
+                    waitpid(*p, Some(WaitPidFlag::WNOHANG)),
+                    Ok(WaitStatus::StillAlive)
+                )
+            });
+            if killed.is_empty() && self.orphans().is_empty() {
+                return;
+            }
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
     }
 
     /// Asks the job to stop (SIGTERM to every process), waits up to `grace`
@@ -538,6 +619,7 @@ impl Job {
     pub async fn end(&mut self) {
         self.signal(Signal::SIGKILL);
         let _ = self.child.kill().await;
+        self.reap_orphans().await;
         if let Some(d) = self.cgroup.take() {
             let _ = tokio::task::spawn_blocking(move || remove_cgroup(&d)).await;
         }

@@ -366,7 +366,7 @@ pub async fn serve(
     if !containment.is_empty() {
         tracing::info!(worker = %id, containment, "trial programs run as jobs");
         if !crate::job::Host::get().contains_daemons() {
-            tracing::warn!("neither a cgroup nor a PID namespace is available here: a process a program detaches (setsid) can outlive its trial");
+            tracing::warn!("neither a cgroup nor a PID namespace is available here: a process a program detaches (setsid) outlives its trial if this worker is killed");
         }
     }
     let mut programs = cfg.programs.clone();
