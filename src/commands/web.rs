@@ -602,30 +602,16 @@ fn payload(s: &zenoh::sample::Sample) -> String {
 async fn follow(session: Session, sh: Arc<Shared>) -> Result<(), Failure> {
     let z = |e: zenoh::Error| Failure::Job(anyhow!("zenoh: {e}"));
     let prefix = sh.prefix.clone();
-    let statuses = session
-        .declare_subscriber(keys::status_all(&prefix))
+    let subscribe = |key: String| session.declare_subscriber(key);
+    let statuses = subscribe(keys::status_all(&prefix)).await.map_err(z)?;
+    let results = subscribe(keys::results_all(&prefix)).await.map_err(z)?;
+    let workers = subscribe(keys::worker_statuses_all(&prefix))
         .await
         .map_err(z)?;
-    let results = session
-        .declare_subscriber(keys::results_all(&prefix))
-        .await
-        .map_err(z)?;
-    let workers = session
-        .declare_subscriber(keys::worker_statuses_all(&prefix))
-        .await
-        .map_err(z)?;
-    let tokens = session
-        .liveliness()
-        .declare_subscriber(keys::workers_all(&prefix))
-        .history(true)
-        .await
-        .map_err(z)?;
-    let coordinators = session
-        .liveliness()
-        .declare_subscriber(keys::coordinators_all(&prefix))
-        .history(true)
-        .await
-        .map_err(z)?;
+    // Tokens already up count too (history).
+    let live = |key: String| session.liveliness().declare_subscriber(key).history(true);
+    let tokens = live(keys::workers_all(&prefix)).await.map_err(z)?;
+    let coordinators = live(keys::coordinators_all(&prefix)).await.map_err(z)?;
     let mut tick = tokio::time::interval(Duration::from_secs(1));
     loop {
         tokio::select! {

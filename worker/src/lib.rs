@@ -49,32 +49,30 @@ fn params_of(req: &TrialRequest) -> Result<protocol::params::ParamValues, TrialE
 /// How far the request's walk plans to carry the robot over its trial, m
 /// ([`nao::trial::planned_travel_m`]); none for the synthetic model.
 pub fn planned_x_m(req: &TrialRequest) -> Result<Option<f64>, TrialError> {
-    if req.model != TrialModel::Nao {
-        return Ok(None);
-    }
-    let params = params_of(req)?;
-    match req.model {
-        TrialModel::Synthetic | TrialModel::Program => Ok(None),
-        TrialModel::Nao => nao::trial::planned_travel_m(req.robot_type, &params, req.duration_s)
-            .map(Some)
-            .map_err(|e| TrialError::Model(e.to_string())),
-    }
+    planned(req, |params| {
+        nao::trial::planned_travel_m(req.robot_type, params, req.duration_s)
+            .map_err(|e| e.to_string())
+    })
 }
 
 /// The full step the request's walk plans, m: `xlength_step_max`, or
 /// shorter where `step_reach` caps it ([`nao::trial::planned_step_m`]);
 /// none for the synthetic model.
 pub fn planned_step_m(req: &TrialRequest) -> Result<Option<f64>, TrialError> {
+    planned(req, |params| {
+        nao::trial::planned_step_m(req.robot_type, params).map_err(|e| e.to_string())
+    })
+}
+
+/// What `plan` says of a NAO request's parameters; none for other models.
+fn planned(
+    req: &TrialRequest,
+    plan: impl FnOnce(&protocol::params::ParamValues) -> Result<f64, String>,
+) -> Result<Option<f64>, TrialError> {
     if req.model != TrialModel::Nao {
         return Ok(None);
     }
-    let params = params_of(req)?;
-    match req.model {
-        TrialModel::Synthetic | TrialModel::Program => Ok(None),
-        TrialModel::Nao => nao::trial::planned_step_m(req.robot_type, &params)
-            .map(Some)
-            .map_err(|e| TrialError::Model(e.to_string())),
-    }
+    plan(&params_of(req)?).map(Some).map_err(TrialError::Model)
 }
 
 /// Runs one trial of a built-in model: a pure function of the request.

@@ -194,8 +194,17 @@ fn panic_text(p: Box<dyn std::any::Any + Send>) -> String {
 /// A trial's key in the worker: (run id, iteration, trial).
 type Held = (String, u64, u32);
 
-fn give_back(req: &TrialRequest, worker: &str, reason: &str, refused: bool) -> TrialFailure {
-    TrialFailure {
+/// Tells `req`'s run that this worker failed it (`refused`: gave it back,
+/// not the trial's fault), with why.
+async fn give_back(
+    session: &Session,
+    prefix: &str,
+    worker: &str,
+    req: &TrialRequest,
+    reason: &str,
+    refused: bool,
+) {
+    let f = TrialFailure {
         run: req.run.clone(),
         iteration: req.iteration,
         trial: req.trial,
@@ -204,6 +213,33 @@ fn give_back(req: &TrialRequest, worker: &str, reason: &str, refused: bool) -> T
         worker: worker.to_string(),
         reason: protocol::wire::fit_reason(reason),
         refused,
+    };
+    put_message(session, &FleetKeys::new(prefix, &req.run).failures(), &f).await;
+}
+
+/// `program` as it is on disk now: registered anew when its file changed
+/// (its new build replaces it in `programs`), with why the trial in hand
+/// goes back then.
+async fn fresh(
+    programs: &mut crate::program::Programs,
+    program: &crate::program::Program,
+    fingerprint: u64,
+) -> Result<crate::program::Program, String> {
+    match program.refreshed().await {
+        None => Ok(program.clone()),
+        Some(Ok(new)) => {
+            let why = format!(
+                "program `{}` changed on disk since this worker registered it: this worker now serves its new build (fingerprint {}), and a run takes one build only",
+                new.name,
+                show_fingerprint(new.fingerprint(fingerprint))
+            );
+            programs.by_name.insert(new.name.clone(), new);
+            Err(why)
+        }
+        Some(Err(e)) => Err(format!(
+            "program `{}` is no longer runnable: {e}",
+            program.name
+        )),
     }
 }
 
@@ -457,8 +493,7 @@ pub async fn serve(
                             }
                             share.done(&run, None);
                             summary.refused += 1;
-                            let fkeys = FleetKeys::new(&prefix, &req.run);
-                            put_message(&session, &fkeys.failures(), &give_back(&req, &id, &why, true)).await;
+                            give_back(&session, &prefix, &id, &req, &why, true).await;
                             continue;
                         }
                         let key = (req.run.clone(), req.iteration, req.trial);
@@ -471,27 +506,14 @@ pub async fn serve(
                             share.done(&run, None);
                             continue;
                         }
-                        let program = match req.program.as_ref().and_then(|p| programs.get(p)) {
-                            Some(p) => match p.refreshed().await {
-                                None => Some(p.clone()),
-                                Some(changed) => {
-                                    let why = match changed {
-                                        Ok(new) => {
-                                            let why = format!(
-                                                "program `{}` changed on disk since this worker registered it: this worker now serves its new build (fingerprint {}), and a run takes one build only",
-                                                new.name,
-                                                show_fingerprint(new.fingerprint(fingerprint))
-                                            );
-                                            programs.by_name.insert(new.name.clone(), new);
-                                            why
-                                        }
-                                        Err(e) => format!("program `{}` is no longer runnable: {e}", p.name),
-                                    };
+                        let program = match req.program.as_ref().and_then(|p| programs.get(p)).cloned() {
+                            Some(p) => match fresh(&mut programs, &p, fingerprint).await {
+                                Ok(p) => Some(p),
+                                Err(why) => {
                                     tracing::warn!(run, %why, "giving the trial back");
                                     share.done(&run, None);
                                     summary.refused += 1;
-                                    let fkeys = FleetKeys::new(&prefix, &req.run);
-                                    put_message(&session, &fkeys.failures(), &give_back(&req, &id, &why, true)).await;
+                                    give_back(&session, &prefix, &id, &req, &why, true).await;
                                     continue;
                                 }
                             },
@@ -537,7 +559,7 @@ pub async fn serve(
                         }
                         Err(reason) => {
                             tracing::error!(%reason, iteration = req.iteration, trial = req.trial, "trial could not run; reporting it");
-                            put_message(&session, &fkeys.failures(), &give_back(&req, &id, &reason, false)).await;
+                            give_back(&session, &prefix, &id, &req, &reason, false).await;
                             summary.refused += 1;
                         }
                     }
@@ -656,10 +678,9 @@ pub async fn serve(
             Ok(None) | Err(_) => break,
         }
     }
-    for ((run, _, _), req) in std::mem::take(&mut held) {
+    for req in std::mem::take(&mut held).into_values() {
         summary.refused += 1;
-        let f = give_back(&req, &id, "the worker is stopping", true);
-        put_message(&session, &FleetKeys::new(&prefix, &run).failures(), &f).await;
+        give_back(&session, &prefix, &id, &req, "the worker is stopping", true).await;
     }
     if let Err(e) = token.undeclare().await {
         tracing::warn!(error = %e, "undeclaring the liveliness token failed");

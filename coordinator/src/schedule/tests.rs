@@ -169,22 +169,14 @@ async fn only_the_dispatch_in_flight_from_its_worker_answers() {
     s.enqueue((0, 0), Instant::now());
     let d = s.take("a", 1, 1, Instant::now(), &none, &mut || 0xfeed);
     assert_eq!(d, [((0, 0), 0xfeed)]);
-    assert_eq!(
-        s.answered((0, 0), "b", 0xfeed, Instant::now()),
-        Answer::OtherWorker
-    );
-    assert_eq!(
-        s.answered((0, 0), "a", 0xbeef, Instant::now()),
-        Answer::WrongDispatch
-    );
-    assert_eq!(
-        s.answered((0, 1), "a", 0xfeed, Instant::now()),
-        Answer::NotInFlight
-    );
-    assert_eq!(
-        s.answered((0, 0), "z", 0xfeed, Instant::now()),
-        Answer::UnknownWorker
-    );
+    for (t, who, dispatch, answer) in [
+        ((0, 0), "b", 0xfeed, Answer::OtherWorker),
+        ((0, 0), "a", 0xbeef, Answer::WrongDispatch),
+        ((0, 1), "a", 0xfeed, Answer::NotInFlight),
+        ((0, 0), "z", 0xfeed, Answer::UnknownWorker),
+    ] {
+        assert_eq!(s.answered(t, who, dispatch, Instant::now()), answer);
+    }
     assert_eq!(
         s.holder((0, 0)),
         Some("a"),
