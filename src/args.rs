@@ -209,7 +209,9 @@ pub struct JobArgs {
     /// Start from an earlier run's history (its run directory).
     #[arg(long)]
     pub from: Option<PathBuf>,
-    /// Seconds a worker may hold a trial before it is given to another.
+    /// Seconds a trial stays with a worker that stops naming it in its
+    /// heartbeat before it is given to another (a worker renews the leases
+    /// of the trials it runs).
     #[arg(long, default_value_t = 120.0)]
     pub lease_s: f64,
     /// A worker not heard from (work request, heartbeat, outcome) for this

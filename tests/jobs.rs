@@ -302,6 +302,29 @@ fn a_junk_line_longer_than_a_message_stops_the_run_naming_it() {
     farm.assert_clean();
 }
 
+/// A program over its CPU-time or file-size limit is a failed trial that
+/// names the limit; the run stops on it.
+#[test]
+fn a_program_over_a_limit_fails_naming_the_limit() {
+    for (mode, flag, said) in [
+        ("spin", "--program-cpu-s", "CPU-time limit of 1 s"),
+        (
+            "bigfile",
+            "--program-file-size-mib",
+            "file-size limit of 1 MiB",
+        ),
+    ] {
+        let farm = Farm::new(mode);
+        let (_, err) = finish(
+            farm.run(&job_program(), mode, 1, 1, 1)
+                .args([flag, "1", "--max-trial-failures", "1"]),
+            1,
+        );
+        assert!(err.contains(said), "{mode}: {err}");
+        farm.assert_clean();
+    }
+}
+
 #[test]
 fn a_program_sees_only_what_its_owner_gives_it() {
     let farm = Farm::new("env");

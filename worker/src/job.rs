@@ -405,7 +405,13 @@ impl Limits {
                     "cannot fork",
                     "can't fork",
                 ];
-                if let (Some(m), true) = (self.memory_mib, memory.iter().any(|p| low.contains(p))) {
+                // A program that ignores SIGXFSZ (Python does) sees EFBIG.
+                let big = ["file too large", "file size limit exceeded"];
+                if let (Some(f), true) = (self.file_size_mib, big.iter().any(|p| low.contains(p))) {
+                    Some(format!("it went over its file-size limit of {f} MiB"))
+                } else if let (Some(m), true) =
+                    (self.memory_mib, memory.iter().any(|p| low.contains(p)))
+                {
                     Some(format!("it ran out of memory under its limit of {m} MiB"))
                 } else if let (Some(n), true) =
                     (self.processes, fork.iter().any(|p| low.contains(p)))
@@ -768,6 +774,10 @@ mod tests {
             .hit(by_code(1), "Traceback …\nMemoryError")
             .unwrap()
             .contains("memory under its limit of 100 MiB"));
+        assert!(l
+            .hit(by_code(1), "OSError: [Errno 27] File too large")
+            .unwrap()
+            .contains("file-size limit of 1 MiB"));
         assert_eq!(l.hit(by_code(1), "the simulator crashed"), None);
         assert_eq!(Limits::default().hit(by_code(152), ""), None);
     }

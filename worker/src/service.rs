@@ -390,9 +390,17 @@ pub async fn serve(
         .await
         .map_err(zerr)?;
     // The trial programs' scratch space: this worker's own, removed when it
-    // stops (or by the next worker on this host, if this one is killed).
-    let scratch = crate::job::Scratch::create("worker", &id)
-        .map_err(|e| WorkerError::Scratch(e.to_string()))?;
+    // stops (or by the next worker on this host, if this one is killed); a
+    // worker without programs makes none, and only sweeps dead ones'.
+    let scratch = if cfg.programs.by_name.is_empty() {
+        crate::job::Scratch::sweep(&std::env::temp_dir(), "worker");
+        None
+    } else {
+        Some(
+            crate::job::Scratch::create("worker", &id)
+                .map_err(|e| WorkerError::Scratch(e.to_string()))?,
+        )
+    };
     let containment = if cfg.programs.by_name.is_empty() {
         String::new()
     } else {
@@ -523,7 +531,7 @@ pub async fn serve(
                         held.insert(key.clone(), req.clone());
                         let tx = tx.clone();
                         let min_trial = cfg.min_trial;
-                        if let Some(program) = program {
+                        if let (Some(program), Some(scratch)) = (program, &scratch) {
                             let run_dir = scratch.path().join(&req.run);
                             let settings = programs.settings.clone();
                             let stop = stop_programs.clone();
@@ -594,7 +602,9 @@ pub async fn serve(
                     .collect();
                 for r in ended {
                     run_program_of.remove(&r);
-                    let dir = scratch.path().join(&r);
+                    let Some(dir) = scratch.as_ref().map(|s| s.path().join(&r)) else {
+                        continue;
+                    };
                     if let Err(e) = std::fs::remove_dir_all(&dir) {
                         if e.kind() != std::io::ErrorKind::NotFound {
                             tracing::warn!(dir = %dir.display(), error = %e, "a run's scratch space was not removed");
