@@ -266,15 +266,15 @@ fn a_killed_run_leaves_no_program_running_and_the_next_start_sweeps_its_scratch(
 fn a_trial_three_times_its_lease_runs_exactly_once() {
     let farm = Farm::new("lease");
     let (stdout, _) = finish(
-        farm.run(&job_program(), "slow", 2, 2, 2).args([
+        farm.run(&job_program(), "slow", 2, 1, 2).args([
             "--lease-s",
-            "2",
+            "3",
             "--program-env",
-            "NAOFARM_TEST_SLEEP=6",
+            "NAOFARM_TEST_SLEEP=9",
         ]),
         0,
     );
-    assert_eq!(util::events(stdout.as_bytes()).decided.len(), 2);
+    assert_eq!(util::events(stdout.as_bytes()).decided.len(), 1);
     let mut started = farm.lines("count");
     let n = started.len();
     started.sort();
@@ -285,7 +285,7 @@ fn a_trial_three_times_its_lease_runs_exactly_once() {
         "a trial ran twice: {:?}",
         farm.lines("count")
     );
-    assert!(n >= 4, "{started:?}");
+    assert!(n >= 2, "{started:?}");
     let finished: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
     assert_eq!(finished["redispatched"], 0, "{finished}");
     farm.assert_clean();
