@@ -429,7 +429,7 @@ pub struct ProgramArgs {
     /// the host's memory over the worker's slots).
     #[arg(long, value_name = "MIB")]
     pub program_memory_mib: Option<u64>,
-    /// Processes of the programs' user (0: no limit; default 4096; the
+    /// Processes of the programs' user (0: no limit; default 8192; the
     /// kernel does not apply it to root).
     #[arg(long, value_name = "N")]
     pub program_processes: Option<u64>,

@@ -331,8 +331,9 @@ pub struct Limits {
 
 impl Limits {
     /// The defaults for a worker of `slots` slots: memory the host's over its
-    /// slots, 4096 processes, files of 16 GiB, CPU unlimited (the wall-time
-    /// time-out bounds a trial).
+    /// slots, 8192 processes (the kernel counts all the user's threads),
+    /// files of 16 GiB, CPU unlimited (the wall-time time-out bounds a
+    /// trial).
     #[must_use]
     pub fn defaults(slots: u32) -> Self {
         let total_mib = std::fs::read_to_string("/proc/meminfo")
@@ -345,7 +346,7 @@ impl Limits {
             .map(|kib| kib / 1024);
         Self {
             memory_mib: total_mib.map(|m| (m / u64::from(slots.max(1))).max(256)),
-            processes: Some(4096),
+            processes: Some(8192),
             file_size_mib: Some(16 << 10),
             cpu_s: None,
         }
