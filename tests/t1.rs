@@ -1,0 +1,221 @@
+//! The league's 2026 robot on the farm: programs/t1/setup.sh installs the
+//! league's MuJoCo server (rcssservermj, pinned) and the example T1 policy
+//! (from the third-party sources; cached per machine), naofarm's own client
+//! runs the policy in numpy, the stock T1 walks, and a farm run of the `t1`
+//! program on the real server is journaled, killed mid-run and resumed.
+#![allow(clippy::unwrap_used)]
+
+mod util;
+
+use std::{
+    io::{BufRead, BufReader, Write},
+    path::{Path, PathBuf},
+    process::{Command, Stdio},
+    time::Duration,
+};
+
+use coordinator::journal::{Journal, Record};
+use util::{naofarm, root, scratch, succeed};
+
+/// The T1 set-up's trial program, setting it up if the cache lacks it. The
+/// sources: `$NAOFARM_T1_SOURCE`, else ../shared/third-party.
+fn t1_program() -> PathBuf {
+    let source = std::env::var_os("NAOFARM_T1_SOURCE")
+        .map_or_else(|| root().join("../shared/third-party"), PathBuf::from);
+    assert!(
+        source.is_dir(),
+        "the T1 policy's sources are not at {} (set NAOFARM_T1_SOURCE to the directory \
+         with rcssservermj-nn_client-*.tar.gz)",
+        source.display()
+    );
+    let out = Command::new(root().join("programs/t1/setup.sh"))
+        .arg(&source)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "the T1 set-up failed: {stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let program = PathBuf::from(stdout.lines().last().unwrap().trim());
+    assert!(program.is_file(), "{}", program.display());
+    program
+}
+
+/// The set-up's directory (the program is in its `bin`).
+fn prefix(program: &Path) -> PathBuf {
+    program.parent().unwrap().parent().unwrap().to_path_buf()
+}
+
+/// One trial of the program, as a worker gives it: its answer.
+fn trial(program: &Path, duration_s: f64, params: &serde_json::Value) -> serde_json::Value {
+    let dir = scratch("t1-trial");
+    let input = serde_json::json!({
+        "run": "r", "iteration": 0, "trial": 0, "seed": 1, "duration_s": duration_s,
+        "robot_type": 0, "params": params, "slot": 0, "scratch": dir.to_path_buf(),
+    });
+    let mut child = Command::new(program)
+        .current_dir(&*dir)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(input.to_string().as_bytes())
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    serde_json::from_str(stdout.lines().last().unwrap()).unwrap()
+}
+
+#[test]
+fn the_t1_policy_in_numpy_is_its_equations() {
+    let program = t1_program();
+    let p = prefix(&program);
+    let out = succeed(
+        Command::new(p.join("venv/bin/python"))
+            .arg(root().join("tests/programs/t1_policy_check.py"))
+            .arg(&p),
+    );
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(said.contains("largest difference"), "{said}");
+}
+
+#[test]
+fn the_stock_t1_walks_on_the_leagues_2026_server() {
+    let program = t1_program();
+    let m = trial(&program, 10.0, &serde_json::json!({}));
+    assert_eq!(m["fell"], false, "{m}");
+    assert_eq!(m["sim_time_s"], 10.0, "{m}");
+    let x = m["x_m"].as_f64().unwrap();
+    assert!(x >= 7.0, "the stock T1 walked {x} m in 10 s: {m}");
+    // A parameter the program does not know is refused by name.
+    let dir = scratch("t1-unknown");
+    let mut child = Command::new(&program)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let bad = serde_json::json!({"run": "r", "iteration": 0, "trial": 0, "seed": 1,
+        "duration_s": 1.0, "robot_type": 0, "params": {"ThighRelHip2_Z": -0.04},
+        "slot": 0, "scratch": dir.to_path_buf()});
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(bad.to_string().as_bytes())
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("ThighRelHip2_Z"), "{err}");
+}
+
+/// A small T1 experiment: 3 iterations of 4 walks of 4 s, tuning the
+/// commanded speed and the action scale.
+fn small_t1(dir: &Path) -> PathBuf {
+    let text = "name = \"t1-test\"\nseed = 1\niterations = 3\ntrials_per_iteration = 4\n\
+        trial_duration_s = 4.0\npipeline_depth = 2\nmodel = \"program\"\nprogram = \"t1\"\n\
+        start = \"expert\"\n\n\
+        [[parameter]]\nname = \"t1_speed\"\nlower = 0.5\nupper = 1.0\nexpert = 1.0\n\n\
+        [[parameter]]\nname = \"t1_action_scale\"\nlower = 0.4\nupper = 0.6\nexpert = 0.5\n\n\
+        [clop]\nn_mcmc = 100\n";
+    let p = dir.join("t1.toml");
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+fn run(exp: &Path, out: &Path, program: &Path) -> Command {
+    let mut cmd = naofarm();
+    cmd.args(["run", "--json", "--workers", "2"])
+        .arg(exp)
+        .arg("--out")
+        .arg(out)
+        .arg("--program")
+        .arg(format!("t1={}", program.display()));
+    cmd
+}
+
+/// The processes working in a directory under `dir` (a trial's program and
+/// its server work in the trial's scratch directory), by command line.
+fn running(dir: &str) -> Vec<String> {
+    std::fs::read_dir("/proc")
+        .unwrap()
+        .flatten()
+        .filter_map(|e| {
+            let cwd = std::fs::read_link(e.path().join("cwd")).ok()?;
+            let cmd = std::fs::read(e.path().join("cmdline")).ok()?;
+            cwd.starts_with(dir)
+                .then(|| String::from_utf8_lossy(&cmd).replace('\0', " "))
+        })
+        .collect()
+}
+
+#[test]
+fn a_t1_run_on_the_real_server_is_journaled_killed_and_resumed() {
+    let program = t1_program();
+    let dir = scratch("t1-run");
+    let exp = small_t1(&dir);
+    let out = dir.join("run");
+    let tmp = dir.join("tmp");
+    std::fs::create_dir_all(&tmp).unwrap();
+    // The run's programs and servers work in its workers' scratch, under
+    // this TMPDIR.
+    let needle = tmp.display().to_string();
+
+    let mut first = run(&exp, &out, &program)
+        .env("TMPDIR", &tmp)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let lines = BufReader::new(first.stdout.take().unwrap()).lines();
+    let mut decided = Vec::new();
+    for line in lines.map_while(Result::ok) {
+        if line.starts_with("{\"event\":\"decided\"") {
+            decided.push(serde_json::from_str::<serde_json::Value>(&line).unwrap());
+            break;
+        }
+    }
+    // Killed while its trials run (the pipeline keeps two iterations going).
+    let in_flight = util::wait_for("a trial's server", Duration::from_secs(60), || {
+        let r = running(&needle);
+        r.iter().any(|c| c.contains("rcssservermj")).then_some(r)
+    });
+    first.kill().unwrap();
+    first.wait().unwrap();
+    assert_eq!(decided.len(), 1, "the first run decided an iteration");
+    let stats = &decided[0]["result"]["stats"];
+    assert_eq!(stats["s"], 1.0, "{stats}");
+    assert!(stats["mx"].as_f64().unwrap() > 2.0, "{stats}");
+    util::wait_for(
+        &format!("the killed run's servers and programs {in_flight:?} to end"),
+        Duration::from_secs(20),
+        || running(&needle).is_empty().then_some(()),
+    );
+
+    succeed(run(&exp, &out, &program).env("TMPDIR", &tmp));
+    let records = Journal::read(&out).unwrap().records();
+    let mut trials = std::collections::BTreeSet::new();
+    for r in &records {
+        if let Record::Outcome {
+            iteration, trial, ..
+        } = r
+        {
+            assert!(trials.insert((*iteration, *trial)), "journaled twice");
+        }
+    }
+    assert_eq!(trials.len(), 3 * 4, "every trial of the 3 iterations once");
+    assert!(running(&needle).is_empty(), "{:?}", running(&needle));
+}
