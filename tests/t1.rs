@@ -49,10 +49,15 @@ fn prefix(program: &Path) -> PathBuf {
 }
 
 /// One trial of the program, as a worker gives it: its answer.
-fn trial(program: &Path, duration_s: f64, params: &serde_json::Value) -> serde_json::Value {
+fn trial(
+    program: &Path,
+    seed: u64,
+    duration_s: f64,
+    params: &serde_json::Value,
+) -> serde_json::Value {
     let dir = scratch("t1-trial");
     let input = serde_json::json!({
-        "run": "r", "iteration": 0, "trial": 0, "seed": 1, "duration_s": duration_s,
+        "run": "r", "iteration": 0, "trial": 0, "seed": seed, "duration_s": duration_s,
         "robot_type": 0, "params": params, "slot": 0, "scratch": dir.to_path_buf(),
     });
     let mut child = Command::new(program)
@@ -94,11 +99,20 @@ fn the_t1_policy_in_numpy_is_its_equations() {
 #[test]
 fn the_stock_t1_walks_on_the_leagues_2026_server() {
     let program = t1_program();
-    let m = trial(&program, 10.0, &serde_json::json!({}));
+    let m = trial(&program, 1, 10.0, &serde_json::json!({}));
     assert_eq!(m["fell"], false, "{m}");
     assert_eq!(m["sim_time_s"], 10.0, "{m}");
     let x = m["x_m"].as_f64().unwrap();
     assert!(x >= 7.0, "the stock T1 walked {x} m in 10 s: {m}");
+    // The trial's noise comes from its seed: the same seed, the same walk
+    // to the bit; another seed, another walk.
+    assert_eq!(trial(&program, 1, 10.0, &serde_json::json!({})), m);
+    let other = trial(&program, 2, 10.0, &serde_json::json!({}));
+    assert_ne!(other["x_m"], m["x_m"], "{other} {m}");
+    // The body is the trial's: a longer thigh walks another walk.
+    let longer = trial(&program, 1, 10.0, &serde_json::json!({"t1_thigh": 1.2}));
+    assert_eq!(longer["fell"], false, "{longer}");
+    assert_ne!(longer["x_m"], m["x_m"], "{longer} {m}");
     // A parameter the program does not know is refused by name.
     let dir = scratch("t1-unknown");
     let mut child = Command::new(&program)
@@ -122,15 +136,16 @@ fn the_stock_t1_walks_on_the_leagues_2026_server() {
     assert!(err.contains("ThighRelHip2_Z"), "{err}");
 }
 
-/// A small T1 experiment: 3 iterations of 4 walks of 4 s, tuning the
-/// commanded speed and the action scale.
+/// experiments/t1.toml cut to a test's size: 3 iterations of 4 walks of 4 s.
 fn small_t1(dir: &Path) -> PathBuf {
-    let text = "name = \"t1-test\"\nseed = 1\niterations = 3\ntrials_per_iteration = 4\n\
-        trial_duration_s = 4.0\npipeline_depth = 2\nmodel = \"program\"\nprogram = \"t1\"\n\
-        start = \"expert\"\n\n\
-        [[parameter]]\nname = \"t1_speed\"\nlower = 0.5\nupper = 1.0\nexpert = 1.0\n\n\
-        [[parameter]]\nname = \"t1_action_scale\"\nlower = 0.4\nupper = 0.6\nexpert = 0.5\n\n\
-        [clop]\nn_mcmc = 100\n";
+    let text = std::fs::read_to_string(root().join("experiments/t1.toml"))
+        .unwrap()
+        .replace("iterations = 300", "iterations = 3")
+        .replace("trials_per_iteration = 10", "trials_per_iteration = 4")
+        .replace("trial_duration_s = 10.0", "trial_duration_s = 4.0")
+        .replace("pipeline_depth = 4", "pipeline_depth = 2")
+        .replace("n_mcmc = 1000", "n_mcmc = 100");
+    assert!(text.contains("iterations = 3\n"), "{text}");
     let p = dir.join("t1.toml");
     std::fs::write(&p, text).unwrap();
     p
@@ -191,7 +206,7 @@ fn a_t1_run_on_the_real_server_is_journaled_killed_and_resumed() {
     // Killed while its trials run (the pipeline keeps two iterations going).
     let in_flight = util::wait_for("a trial's server", Duration::from_secs(60), || {
         let r = running(&needle);
-        r.iter().any(|c| c.contains("rcssservermj")).then_some(r)
+        r.iter().any(|c| c.contains("t1-server")).then_some(r)
     });
     first.kill().unwrap();
     first.wait().unwrap();
