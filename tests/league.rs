@@ -8,39 +8,17 @@
 mod util;
 
 use std::{
-    io::{BufRead, BufReader},
     path::{Path, PathBuf},
-    process::{Command, Stdio},
+    process::Command,
     time::Duration,
 };
 
-use coordinator::journal::{Journal, Record};
 use util::{naofarm, root, scratch, succeed};
 
 /// The league build's trial program, building it if the cache lacks it.
 /// The sources: `$NAOFARM_LEAGUE_SOURCE`, else ../shared/third-party.
 fn league_program() -> PathBuf {
-    let source = std::env::var_os("NAOFARM_LEAGUE_SOURCE")
-        .map_or_else(|| root().join("../shared/third-party"), PathBuf::from);
-    assert!(
-        source.is_dir(),
-        "the league's sources are not at {} (set NAOFARM_LEAGUE_SOURCE to the directory \
-         with the SimSpark and UT Austin Villa tarballs)",
-        source.display()
-    );
-    let out = Command::new(root().join("programs/league/build.sh"))
-        .arg(&source)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "the league build failed: {stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let program = PathBuf::from(stdout.lines().last().unwrap().trim());
-    assert!(program.is_file(), "{}", program.display());
-    program
+    util::set_up_program("league/build.sh", "NAOFARM_LEAGUE_SOURCE")
 }
 
 /// The league experiment cut to a test's size: 3 iterations of 4 walks of 4 s.
@@ -58,14 +36,7 @@ fn small_league(dir: &Path) -> PathBuf {
 }
 
 fn run(exp: &Path, out: &Path, program: &Path) -> Command {
-    let mut cmd = naofarm();
-    cmd.args(["run", "--json", "--workers", "2"])
-        .arg(exp)
-        .arg("--out")
-        .arg(out)
-        .arg("--program")
-        .arg(format!("league={}", program.display()));
-    cmd
+    util::program_run(exp, out, "league", program)
 }
 
 /// Every live (not zombie) process: (pid, parent pid, name).
@@ -147,19 +118,7 @@ fn a_league_run_on_the_real_server_is_journaled_killed_and_resumed() {
     let out = dir.join("run");
 
     // The first run: killed (SIGKILL) once it has decided an iteration.
-    let mut first = run(&exp, &out, &program)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let lines = BufReader::new(first.stdout.take().unwrap()).lines();
-    let mut decided = Vec::new();
-    for line in lines.map_while(Result::ok) {
-        if line.starts_with("{\"event\":\"decided\"") {
-            decided.push(serde_json::from_str::<serde_json::Value>(&line).unwrap());
-            break;
-        }
-    }
+    let (mut first, stats) = util::until_first_decision(&mut run(&exp, &out, &program));
     // Its trials in flight: the programs, their servers and agents (the
     // pipeline keeps trials going; wait until a server runs).
     let pid = first.id();
@@ -187,9 +146,7 @@ fn a_league_run_on_the_real_server_is_journaled_killed_and_resumed() {
     );
     first.kill().unwrap();
     first.wait().unwrap();
-    assert_eq!(decided.len(), 1, "the first run decided an iteration");
     // The expert (UT's type-0 walk on the NAO's body) walks, on the real server.
-    let stats = &decided[0]["result"]["stats"];
     assert_eq!(stats["s"], 1.0, "{stats}");
     assert!(stats["mx"].as_f64().unwrap() > 1.0, "{stats}");
     // The killed run's programs, servers and agents do not outlive it.
@@ -207,16 +164,7 @@ fn a_league_run_on_the_real_server_is_journaled_killed_and_resumed() {
 
     // Resumed: the same directory, the same command.
     succeed(&mut run(&exp, &out, &program));
-    let records = Journal::read(&out).unwrap().records();
-    let mut trials = std::collections::BTreeSet::new();
-    for r in &records {
-        if let Record::Outcome {
-            iteration, trial, ..
-        } = r
-        {
-            assert!(trials.insert((*iteration, *trial)), "journaled twice");
-        }
-    }
+    let trials = util::journaled_once(&out);
     assert_eq!(
         trials.len(),
         3 * 4,

@@ -8,53 +8,30 @@
 mod util;
 
 use std::{
-    io::{BufRead, BufReader, Write},
+    io::Write,
     path::{Path, PathBuf},
     process::{Command, Stdio},
     time::Duration,
 };
 
-use coordinator::journal::{Journal, Record};
-use util::{naofarm, root, scratch, succeed};
+use util::{root, scratch, succeed};
 
-/// The T1 set-up's trial program, setting it up if the cache lacks it. The
-/// sources: `$NAOFARM_T1_SOURCE`, else ../shared/third-party.
-fn t1_program() -> PathBuf {
-    let source = std::env::var_os("NAOFARM_T1_SOURCE")
-        .map_or_else(|| root().join("../shared/third-party"), PathBuf::from);
-    assert!(
-        source.is_dir(),
-        "the T1 policy's sources are not at {} (set NAOFARM_T1_SOURCE to the directory \
-         with rcssservermj-nn_client-*.tar.gz)",
-        source.display()
-    );
-    let out = Command::new(root().join("programs/t1/setup.sh"))
-        .arg(&source)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "the T1 set-up failed: {stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let program = PathBuf::from(stdout.lines().last().unwrap().trim());
-    assert!(program.is_file(), "{}", program.display());
-    program
+/// The T1 set-up's trial program (set up if the cache lacks it, from
+/// `$NAOFARM_T1_SOURCE` or ../shared/third-party) and the set-up's
+/// directory (the program is in its `bin`).
+fn t1_program() -> (PathBuf, PathBuf) {
+    let program = util::set_up_program("t1/setup.sh", "NAOFARM_T1_SOURCE");
+    let prefix = program.parent().unwrap().parent().unwrap().to_path_buf();
+    (program, prefix)
 }
 
-/// The set-up's directory (the program is in its `bin`).
-fn prefix(program: &Path) -> PathBuf {
-    program.parent().unwrap().parent().unwrap().to_path_buf()
-}
-
-/// One trial of the program, as a worker gives it: its answer.
-fn trial(
+/// One trial of the program, as a worker gives it: how it ended.
+fn answer(
     program: &Path,
     seed: u64,
     duration_s: f64,
     params: &serde_json::Value,
-) -> serde_json::Value {
+) -> std::process::Output {
     let dir = scratch("t1-trial");
     let input = serde_json::json!({
         "run": "r", "iteration": 0, "trial": 0, "seed": seed, "duration_s": duration_s,
@@ -73,20 +50,26 @@ fn trial(
         .unwrap()
         .write_all(input.to_string().as_bytes())
         .unwrap();
-    let out = child.wait_with_output().unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    child.wait_with_output().unwrap()
+}
+
+/// One trial that must succeed: its measurement.
+fn trial(
+    program: &Path,
+    seed: u64,
+    duration_s: f64,
+    params: &serde_json::Value,
+) -> serde_json::Value {
+    let out = answer(program, seed, duration_s, params);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
     let stdout = String::from_utf8_lossy(&out.stdout);
     serde_json::from_str(stdout.lines().last().unwrap()).unwrap()
 }
 
 #[test]
 fn the_t1_policy_in_numpy_is_its_equations() {
-    let program = t1_program();
-    let p = prefix(&program);
+    let (_, p) = t1_program();
     let out = succeed(
         Command::new(p.join("venv/bin/python"))
             .arg(root().join("tests/programs/t1_policy_check.py"))
@@ -98,7 +81,7 @@ fn the_t1_policy_in_numpy_is_its_equations() {
 
 #[test]
 fn the_stock_t1_walks_on_the_leagues_2026_server() {
-    let program = t1_program();
+    let (program, _) = t1_program();
     let m = trial(&program, 1, 10.0, &serde_json::json!({}));
     assert_eq!(m["fell"], false, "{m}");
     assert_eq!(m["sim_time_s"], 10.0, "{m}");
@@ -114,23 +97,12 @@ fn the_stock_t1_walks_on_the_leagues_2026_server() {
     assert_eq!(longer["fell"], false, "{longer}");
     assert_ne!(longer["x_m"], m["x_m"], "{longer} {m}");
     // A parameter the program does not know is refused by name.
-    let dir = scratch("t1-unknown");
-    let mut child = Command::new(&program)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let bad = serde_json::json!({"run": "r", "iteration": 0, "trial": 0, "seed": 1,
-        "duration_s": 1.0, "robot_type": 0, "params": {"ThighRelHip2_Z": -0.04},
-        "slot": 0, "scratch": dir.to_path_buf()});
-    child
-        .stdin
-        .take()
-        .unwrap()
-        .write_all(bad.to_string().as_bytes())
-        .unwrap();
-    let out = child.wait_with_output().unwrap();
+    let out = answer(
+        &program,
+        1,
+        1.0,
+        &serde_json::json!({"ThighRelHip2_Z": -0.04}),
+    );
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(err.contains("ThighRelHip2_Z"), "{err}");
@@ -152,14 +124,7 @@ fn small_t1(dir: &Path) -> PathBuf {
 }
 
 fn run(exp: &Path, out: &Path, program: &Path) -> Command {
-    let mut cmd = naofarm();
-    cmd.args(["run", "--json", "--workers", "2"])
-        .arg(exp)
-        .arg("--out")
-        .arg(out)
-        .arg("--program")
-        .arg(format!("t1={}", program.display()));
-    cmd
+    util::program_run(exp, out, "t1", program)
 }
 
 /// The processes working in a directory under `dir` (a trial's program and
@@ -179,7 +144,7 @@ fn running(dir: &str) -> Vec<String> {
 
 #[test]
 fn a_t1_run_on_the_real_server_is_journaled_killed_and_resumed() {
-    let program = t1_program();
+    let (program, _) = t1_program();
     let dir = scratch("t1-run");
     let exp = small_t1(&dir);
     let out = dir.join("run");
@@ -189,20 +154,8 @@ fn a_t1_run_on_the_real_server_is_journaled_killed_and_resumed() {
     // this TMPDIR.
     let needle = tmp.display().to_string();
 
-    let mut first = run(&exp, &out, &program)
-        .env("TMPDIR", &tmp)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let lines = BufReader::new(first.stdout.take().unwrap()).lines();
-    let mut decided = Vec::new();
-    for line in lines.map_while(Result::ok) {
-        if line.starts_with("{\"event\":\"decided\"") {
-            decided.push(serde_json::from_str::<serde_json::Value>(&line).unwrap());
-            break;
-        }
-    }
+    let (mut first, stats) =
+        util::until_first_decision(run(&exp, &out, &program).env("TMPDIR", &tmp));
     // Killed while its trials run (the pipeline keeps two iterations going).
     let in_flight = util::wait_for("a trial's server", Duration::from_secs(60), || {
         let r = running(&needle);
@@ -210,10 +163,11 @@ fn a_t1_run_on_the_real_server_is_journaled_killed_and_resumed() {
     });
     first.kill().unwrap();
     first.wait().unwrap();
-    assert_eq!(decided.len(), 1, "the first run decided an iteration");
-    let stats = &decided[0]["result"]["stats"];
-    assert_eq!(stats["s"], 1.0, "{stats}");
-    assert!(stats["mx"].as_f64().unwrap() > 2.0, "{stats}");
+    // The expert stood in every walk of the first iteration.
+    assert!(
+        stats["s"] == 1.0 && stats["mx"].as_f64().unwrap() > 2.0,
+        "{stats}"
+    );
     util::wait_for(
         &format!("the killed run's servers and programs {in_flight:?} to end"),
         Duration::from_secs(20),
@@ -221,16 +175,7 @@ fn a_t1_run_on_the_real_server_is_journaled_killed_and_resumed() {
     );
 
     succeed(run(&exp, &out, &program).env("TMPDIR", &tmp));
-    let records = Journal::read(&out).unwrap().records();
-    let mut trials = std::collections::BTreeSet::new();
-    for r in &records {
-        if let Record::Outcome {
-            iteration, trial, ..
-        } = r
-        {
-            assert!(trials.insert((*iteration, *trial)), "journaled twice");
-        }
-    }
+    let trials = util::journaled_once(&out);
     assert_eq!(trials.len(), 3 * 4, "every trial of the 3 iterations once");
     assert!(running(&needle).is_empty(), "{:?}", running(&needle));
 }

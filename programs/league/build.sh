@@ -20,18 +20,9 @@
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-usage() {
-    echo "usage: $0 SOURCE [CACHE]" >&2
-    exit 2
-}
-[[ $# -ge 1 && $# -le 2 ]] || usage
-source_dir="$1"
-cache="${2:-${NAOFARM_LEAGUE_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/naofarm/league}}"
-[[ -d "$source_dir" ]] || {
-    echo "$0: SOURCE $source_dir is not a directory" >&2
-    exit 2
-}
-source_dir="$(cd "$source_dir" && pwd)"
+# shellcheck source=programs/set-up.sh
+. "$here/../set-up.sh"
+set_up_arguments NAOFARM_LEAGUE_CACHE league "$@"
 
 # One source: a tarball matching $1 or an unpacked tree matching $2.
 find_source() {

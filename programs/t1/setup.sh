@@ -20,17 +20,9 @@
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-usage() {
-    echo "usage: $0 SOURCE [CACHE]" >&2
-    exit 2
-}
-[[ $# -ge 1 && $# -le 2 ]] || usage
-source_dir="$1"
-cache="${2:-${NAOFARM_T1_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/naofarm/t1}}"
-[[ -d "$source_dir" ]] || {
-    echo "$0: SOURCE $source_dir is not a directory" >&2
-    exit 2
-}
+# shellcheck source=programs/set-up.sh
+. "$here/../set-up.sh"
+set_up_arguments NAOFARM_T1_CACHE t1 "$@"
 client="$(find "$source_dir" -maxdepth 1 -name 'rcssservermj-nn_client-*.tar.gz' -type f | sort | head -n 1)"
 [[ -n "$client" ]] || {
     echo "$0: no rcssservermj-nn_client-*.tar.gz in $source_dir" >&2

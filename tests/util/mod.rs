@@ -272,3 +272,77 @@ pub fn wait_for<T>(
         std::thread::sleep(std::time::Duration::from_millis(10));
     }
 }
+
+/// A trial program the project sets up outside the clone:
+/// `programs/NAME/SCRIPT SOURCE` must succeed, and the program is the last
+/// line it prints. The sources: `$VAR`, else ../shared/third-party.
+pub fn set_up_program(script: &str, var: &str) -> PathBuf {
+    let source =
+        std::env::var_os(var).map_or_else(|| root().join("../shared/third-party"), PathBuf::from);
+    assert!(
+        source.is_dir(),
+        "the sources for {script} are not at {} (set {var} to their directory)",
+        source.display()
+    );
+    let out = Command::new(root().join("programs").join(script))
+        .arg(&source)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{script} failed: {stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let program = PathBuf::from(stdout.lines().last().unwrap().trim());
+    assert!(program.is_file(), "{}", program.display());
+    program
+}
+
+/// `naofarm run --json --workers 2 EXP --out OUT --program NAME=PROGRAM`.
+pub fn program_run(exp: &Path, out: &Path, name: &str, program: &Path) -> Command {
+    let mut cmd = naofarm();
+    cmd.args(["run", "--json", "--workers", "2"])
+        .arg(exp)
+        .arg("--out")
+        .arg(out)
+        .arg("--program")
+        .arg(format!("{name}={}", program.display()));
+    cmd
+}
+
+/// The trials (iteration, index) a run's journal holds outcomes of, each
+/// journaled once (asserted).
+pub fn journaled_once(out: &Path) -> std::collections::BTreeSet<(u64, u32)> {
+    let mut trials = std::collections::BTreeSet::new();
+    for r in coordinator::journal::Journal::read(out).unwrap().records() {
+        if let coordinator::journal::Record::Outcome {
+            iteration, trial, ..
+        } = r
+        {
+            assert!(trials.insert((iteration, trial)), "journaled twice");
+        }
+    }
+    trials
+}
+
+/// Starts `cmd` (a `run --json`; its stderr discarded) and reads its events
+/// up to its first decided iteration: the process, still running, and that
+/// iteration's statistics (`Stats`).
+pub fn until_first_decision(cmd: &mut Command) -> (std::process::Child, serde_json::Value) {
+    use std::io::BufRead;
+    let mut child = cmd
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let lines = std::io::BufReader::new(child.stdout.take().unwrap()).lines();
+    for line in lines.map_while(Result::ok) {
+        if line.starts_with("{\"event\":\"decided\"") {
+            let v: serde_json::Value = serde_json::from_str(&line).unwrap();
+            return (child, v["result"]["stats"].clone());
+        }
+    }
+    let status = child.wait().unwrap();
+    panic!("the run ended ({status}) before it decided an iteration");
+}
