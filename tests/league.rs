@@ -13,7 +13,7 @@ use std::{
     time::Duration,
 };
 
-use util::{naofarm, root, scratch, succeed};
+use util::{naofarm, scratch, succeed};
 
 /// The league build's trial program, building it if the cache lacks it.
 /// The sources: `$NAOFARM_LEAGUE_SOURCE`, else ../shared/third-party.
@@ -23,16 +23,7 @@ fn league_program() -> PathBuf {
 
 /// The league experiment cut to a test's size: 3 iterations of 4 walks of 4 s.
 fn small_league(dir: &Path) -> PathBuf {
-    let text = std::fs::read_to_string(root().join("experiments/league.toml"))
-        .unwrap()
-        .replace("iterations = 150", "iterations = 3")
-        .replace("trials_per_iteration = 10", "trials_per_iteration = 4")
-        .replace("trial_duration_s = 10.0", "trial_duration_s = 4.0")
-        .replace("pipeline_depth = 4", "pipeline_depth = 2")
-        .replace("n_mcmc = 1000", "n_mcmc = 100");
-    let p = dir.join("league.toml");
-    std::fs::write(&p, text).unwrap();
-    p
+    util::small_experiment("league.toml", "iterations = 150", dir)
 }
 
 fn run(exp: &Path, out: &Path, program: &Path) -> Command {

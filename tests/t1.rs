@@ -110,17 +110,7 @@ fn the_stock_t1_walks_on_the_leagues_2026_server() {
 
 /// experiments/t1.toml cut to a test's size: 3 iterations of 4 walks of 4 s.
 fn small_t1(dir: &Path) -> PathBuf {
-    let text = std::fs::read_to_string(root().join("experiments/t1.toml"))
-        .unwrap()
-        .replace("iterations = 300", "iterations = 3")
-        .replace("trials_per_iteration = 10", "trials_per_iteration = 4")
-        .replace("trial_duration_s = 10.0", "trial_duration_s = 4.0")
-        .replace("pipeline_depth = 4", "pipeline_depth = 2")
-        .replace("n_mcmc = 1000", "n_mcmc = 100");
-    assert!(text.contains("iterations = 3\n"), "{text}");
-    let p = dir.join("t1.toml");
-    std::fs::write(&p, text).unwrap();
-    p
+    util::small_experiment("t1.toml", "iterations = 300", dir)
 }
 
 fn run(exp: &Path, out: &Path, program: &Path) -> Command {

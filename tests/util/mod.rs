@@ -284,16 +284,8 @@ pub fn set_up_program(script: &str, var: &str) -> PathBuf {
         "the sources for {script} are not at {} (set {var} to their directory)",
         source.display()
     );
-    let out = Command::new(root().join("programs").join(script))
-        .arg(&source)
-        .output()
-        .unwrap();
+    let out = succeed(Command::new(root().join("programs").join(script)).arg(&source));
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{script} failed: {stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let program = PathBuf::from(stdout.lines().last().unwrap().trim());
     assert!(program.is_file(), "{}", program.display());
     program
@@ -345,4 +337,21 @@ pub fn until_first_decision(cmd: &mut Command) -> (std::process::Child, serde_js
     }
     let status = child.wait().unwrap();
     panic!("the run ended ({status}) before it decided an iteration");
+}
+
+/// experiments/FILE cut to a test's size in `dir`: 3 iterations of 4 walks
+/// of 4 s, two in flight, a light CLOP (the file's own `iterations` line
+/// given, since it differs per experiment).
+pub fn small_experiment(file: &str, iterations: &str, dir: &Path) -> PathBuf {
+    let text = std::fs::read_to_string(root().join("experiments").join(file))
+        .unwrap()
+        .replace(iterations, "iterations = 3")
+        .replace("trials_per_iteration = 10", "trials_per_iteration = 4")
+        .replace("trial_duration_s = 10.0", "trial_duration_s = 4.0")
+        .replace("pipeline_depth = 4", "pipeline_depth = 2")
+        .replace("n_mcmc = 1000", "n_mcmc = 100");
+    assert!(text.contains("iterations = 3\n"), "{text}");
+    let p = dir.join(file);
+    std::fs::write(&p, text).unwrap();
+    p
 }

@@ -190,17 +190,20 @@ fn find(name: &str) -> Option<PathBuf> {
 
 /// The parent of process `pid`, if it lives.
 fn parent(pid: u32) -> Option<u32> {
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
-    let rest = &stat[stat.rfind(')')? + 1..];
-    rest.split_whitespace().nth(1)?.parse().ok()
+    stat_field(pid, 1)
 }
 
 /// When process `pid` started (clock ticks after boot), if it lives.
 fn started(pid: u32) -> Option<u64> {
+    stat_field(pid, 19)
+}
+
+/// Field `n` after the command name of `/proc/PID/stat` (0: the state).
+fn stat_field<T: std::str::FromStr>(pid: u32, n: usize) -> Option<T> {
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
     // The command name may hold spaces and parentheses: fields follow the last ')'.
     let rest = &stat[stat.rfind(')')? + 1..];
-    rest.split_whitespace().nth(19)?.parse().ok()
+    rest.split_whitespace().nth(n)?.parse().ok()
 }
 
 /// This process's own directory for its jobs' cgroups, made beside it in its
@@ -627,6 +630,8 @@ impl Job {
         self.signal(Signal::SIGKILL);
         let _ = self.child.kill().await;
         self.reap_orphans().await;
+        // Reaped: its group id may name another process's group from now on.
+        self.pgid = None;
         if let Some(d) = self.cgroup.take() {
             let _ = tokio::task::spawn_blocking(move || remove_cgroup(&d)).await;
         }
