@@ -431,6 +431,47 @@ fn a_program_rewritten_mid_run_is_a_new_build_the_run_does_not_mix() {
     farm.assert_clean();
 }
 
+/// A program that serves (tests/programs/served) is started once for its
+/// run in its slot and kept between the trials; a trial it botches ends
+/// it and runs again in a fresh one; nothing of it outlives the run. With a
+/// CPU-time limit, which bounds one trial, each trial is a process of its
+/// own.
+#[test]
+fn a_program_that_serves_is_kept_between_trials_and_ends_with_its_run() {
+    let program = root().join("tests/programs/served");
+    let pid = |line: &str| line.split_whitespace().nth(1).unwrap().to_string();
+    let farm = Farm::new("served");
+    let (stdout, err) = finish(&mut farm.run(&program, "served", 1, 3, 4), 0);
+    assert_eq!(util::events(stdout.as_bytes()).decided.len(), 3, "{err}");
+    assert_eq!(util::journaled_once(&farm.out()).len(), 3 * 4, "{err}");
+    let starts = farm.lines("starts");
+    assert_eq!(
+        starts.len(),
+        2,
+        "one process, and one after the junk: {starts:?}"
+    );
+    assert!(starts.iter().all(|s| s.starts_with("serve ")), "{starts:?}");
+    let trials = farm.lines("trials");
+    assert_eq!(trials.len(), 3 * 4 + 1, "{trials:?}");
+    let junked: Vec<&String> = trials.iter().filter(|t| t.starts_with("1-0 ")).collect();
+    assert_eq!(
+        junked.iter().map(|t| pid(t)).collect::<Vec<_>>(),
+        [pid(&starts[0]), pid(&starts[1])],
+        "the junked trial, asked again of a fresh process: {trials:?}"
+    );
+    assert!(err.contains("not a measurement"), "{err}");
+    farm.assert_clean();
+
+    let farm = Farm::new("served-cpu");
+    let mut cmd = farm.run(&program, "served", 1, 2, 2);
+    cmd.args(["--program-cpu-s", "100"]);
+    finish(&mut cmd, 0);
+    let starts = farm.lines("starts");
+    assert_eq!(starts.len(), 2 * 2 + 1, "{starts:?}");
+    assert!(starts.iter().all(|s| s.starts_with("once ")), "{starts:?}");
+    farm.assert_clean();
+}
+
 #[test]
 fn ctrl_c_on_run_stops_its_programs_and_their_children() {
     let farm = Farm::new("sigint");

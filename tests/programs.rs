@@ -58,7 +58,8 @@ fn trial(name: &str, timeout: Duration) -> Result<protocol::measurement::Measure
         ..Settings::default()
     };
     let stop = tokio_util::sync::CancellationToken::new();
-    rt.block_on(run(&p, &req, 1, &dir.join("slot-1"), &settings, &stop))
+    let pool = worker::served::Pool::default();
+    rt.block_on(run(&p, &req, 1, &dir.join("slot-1"), &settings, &stop, &pool))
 }
 
 #[test]

@@ -25,6 +25,45 @@ fn t1_program() -> (PathBuf, PathBuf) {
     (program, prefix)
 }
 
+/// A trial as a worker gives it, in `dir`.
+fn input(dir: &Path, seed: u64, duration_s: f64, params: &serde_json::Value) -> serde_json::Value {
+    serde_json::json!({
+        "run": "r", "iteration": 0, "trial": 0, "seed": seed, "duration_s": duration_s,
+        "robot_type": 0, "params": params, "slot": 0, "scratch": dir.to_path_buf(),
+    })
+}
+
+/// Trials answered one after another by one process (`t1-trial --serve`,
+/// as a worker keeps it): their measurements.
+fn served(program: &Path, trials: &[(u64, serde_json::Value)]) -> Vec<serde_json::Value> {
+    let dir = scratch("t1-served");
+    let lines: String = trials
+        .iter()
+        .map(|(seed, params)| format!("{}\n", input(&dir, *seed, 10.0, params)))
+        .collect();
+    let mut child = Command::new(program)
+        .arg("--serve")
+        .current_dir(&*dir)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(lines.as_bytes())
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
 /// One trial of the program, as a worker gives it: how it ended.
 fn answer(
     program: &Path,
@@ -33,10 +72,7 @@ fn answer(
     params: &serde_json::Value,
 ) -> std::process::Output {
     let dir = scratch("t1-trial");
-    let input = serde_json::json!({
-        "run": "r", "iteration": 0, "trial": 0, "seed": seed, "duration_s": duration_s,
-        "robot_type": 0, "params": params, "slot": 0, "scratch": dir.to_path_buf(),
-    });
+    let input = input(&dir, seed, duration_s, params);
     let mut child = Command::new(program)
         .current_dir(&*dir)
         .stdin(Stdio::piped())
@@ -96,6 +132,19 @@ fn the_stock_t1_walks_on_the_leagues_2026_server() {
     let longer = trial(&program, 1, 10.0, &serde_json::json!({"t1_thigh": 1.2}));
     assert_eq!(longer["fell"], false, "{longer}");
     assert_ne!(longer["x_m"], m["x_m"], "{longer} {m}");
+    // One process kept between trials, as a worker keeps it, answers each
+    // as a fresh one does, to the bit, whatever it ran before.
+    let stock = serde_json::json!({});
+    let warm = served(
+        &program,
+        &[
+            (1, serde_json::json!({"t1_thigh": 1.2})),
+            (1, stock.clone()),
+            (2, stock.clone()),
+            (1, stock),
+        ],
+    );
+    assert_eq!(warm, [longer, m.clone(), other, m]);
     // A parameter the program does not know is refused by name.
     let out = answer(
         &program,
@@ -146,10 +195,11 @@ fn a_t1_run_on_the_real_server_is_journaled_killed_and_resumed() {
 
     let (mut first, stats) =
         util::until_first_decision(run(&exp, &out, &program).env("TMPDIR", &tmp));
-    // Killed while its trials run (the pipeline keeps two iterations going).
+    // Killed while its trials run (the pipeline keeps two iterations going):
+    // a kept program with a trial's server forked from it.
     let in_flight = util::wait_for("a trial's server", Duration::from_secs(60), || {
         let r = running(&needle);
-        r.iter().any(|c| c.contains("t1-server")).then_some(r)
+        (r.iter().filter(|c| c.contains("t1-trial --serve")).count() >= 2).then_some(r)
     });
     first.kill().unwrap();
     first.wait().unwrap();

@@ -33,7 +33,7 @@ pins=(rcsssmj==0.2.1 mujoco==3.5.0 numpy==2.4.6)
 key="$({
     printf '%s\n' "${pins[@]}"
     sha256sum <"$client"
-    cat "$here"/patches/*.patch "$here/t1-trial" "$here/t1-server" "$here/policy.py" "$here/setup.sh"
+    cat "$here"/patches/*.patch "$here/t1-trial" "$here/server.py" "$here/policy.py" "$here/setup.sh"
 } | sha256sum | cut -c1-16)"
 prefix="$cache/$key"
 mkdir -p "$cache"
@@ -58,15 +58,13 @@ tar -xzf "$client" -C "$prefix/policy" --strip-components=3 --wildcards \
     '*/example/nn_client/locomotion_nn.pth' '*/example/nn_client/locomotion_nn_meta.json'
 # The policy's licence (MIT) goes with it.
 tar -xzf "$client" -C "$prefix/policy" --strip-components=1 --wildcards '*/LICENSE'
-cp "$here/policy.py" "$prefix/bin/policy.py"
-for program in t1-server t1-trial; do
-    {
-        echo "#!$prefix/venv/bin/python"
-        tail -n +2 "$here/$program"
-    } >"$prefix/bin/$program.new"
-    chmod +x "$prefix/bin/$program.new"
-    mv "$prefix/bin/$program.new" "$prefix/bin/$program"
-done
+cp "$here/policy.py" "$here/server.py" "$prefix/bin/"
+{
+    echo "#!$prefix/venv/bin/python"
+    tail -n +2 "$here/t1-trial"
+} >"$prefix/bin/t1-trial.new"
+chmod +x "$prefix/bin/t1-trial.new"
+mv "$prefix/bin/t1-trial.new" "$prefix/bin/t1-trial"
 echo "$key" >"$prefix/.built"
 echo "t1 set-up $key is in $prefix"
 echo "$prefix/bin/t1-trial"

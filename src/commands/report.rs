@@ -431,9 +431,11 @@ fn program_trials(
         .build()
         .map_err(|e| Failure::Job(e.into()))?;
     let stop = tokio_util::sync::CancellationToken::new();
+    let pool = worker::served::Pool::default();
     let found = rt.block_on(async {
         let lane = |lane: u32| {
             let stop = stop.clone();
+            let pool = &pool;
             let root = scratch.path().to_path_buf();
             async move {
                 let slot = worker::job::Slot::claim()
@@ -442,9 +444,10 @@ fn program_trials(
                 let mut got = Vec::new();
                 for k in (lane..trials).step_by(lanes as usize) {
                     let req = table_request(exp, params, k);
-                    let m = worker::program::run(program, &req, slot.n, &dir, settings, &stop)
-                        .await
-                        .map_err(|e| Failure::Job(anyhow!("Table IV trial {k}: {e}")))?;
+                    let m =
+                        worker::program::run(program, &req, slot.n, &dir, settings, &stop, pool)
+                            .await
+                            .map_err(|e| Failure::Job(anyhow!("Table IV trial {k}: {e}")))?;
                     got.push((k, m));
                 }
                 Ok::<_, Failure>(got)
@@ -452,14 +455,16 @@ fn program_trials(
         };
         let all = futures_util::future::join_all((0..lanes).map(lane));
         tokio::pin!(all);
-        tokio::select! {
+        let found = tokio::select! {
             found = &mut all => found,
             why = crate::serve::interrupted() => {
                 stop.cancel();
                 let _ = all.await;
                 vec![Err(Failure::Job(anyhow!("interrupted by {why}: the programs were stopped")))]
             }
-        }
+        };
+        pool.stop_all(settings.grace).await;
+        found
     });
     drop(scratch);
     let mut all = Vec::new();

@@ -7,8 +7,10 @@
 //! [`noise`] (the seeded noise both models draw from), [`fingerprint`] (the
 //! hash of probe trials that tells workers of the same bits), [`program`]
 //! (trial programs the worker's owner registered: any simulator, run once
-//! per trial with the trial as JSON), [`job`] (a program's processes as one
-//! job: contained, limited, tied to the worker, in a slot of the host's).
+//! per trial with the trial as JSON), [`served`] (programs kept running in
+//! a slot between a run's trials, for those that serve), [`job`] (a
+//! program's processes as one job: contained, limited, tied to the worker,
+//! in a slot of the host's).
 //! [`run_trial`] is the one trial interface, a pure function of the request.
 //!
 //! This crate must not keep state between trials or decide anything about
@@ -21,6 +23,7 @@ pub mod job;
 pub mod nao;
 pub mod noise;
 pub mod program;
+pub mod served;
 pub mod service;
 pub mod share;
 pub mod synthetic;

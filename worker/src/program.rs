@@ -18,7 +18,10 @@
 //!
 //! Each trial runs as a [`crate::job::Job`]: contained, in a clean
 //! environment ([`Settings::env_for`]), under the owner's limits, and
-//! stopped whole when it ends, times out or the worker stops.
+//! stopped whole when it ends, times out or the worker stops. A program
+//! whose `--version` says [`SERVE_LINE`] is kept running in its slot
+//! between the trials of a run instead ([`crate::served`]): one job then
+//! runs the run's trials in that slot one after another.
 
 use std::{
     collections::BTreeMap,
@@ -46,6 +49,9 @@ const STDERR_TAIL: usize = 600;
 const PIPES_WITHIN: Duration = Duration::from_secs(2);
 /// Bytes of `PROGRAM --version` read for its first line.
 const VERSION_BYTES: u64 = 4096;
+/// A line of `PROGRAM --version` saying the program serves trials one after
+/// another when started as `PROGRAM --serve` (docs/programs.md).
+pub const SERVE_LINE: &str = "naofarm serve 1";
 
 /// Why a program could not be registered.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -87,6 +93,9 @@ pub struct Program {
     pub version: Option<String>,
     /// Hash of the file's bytes and of `version`: the program's build.
     pub identity: u64,
+    /// Whether `--version` said [`SERVE_LINE`]: the program answers trials
+    /// one after another as `PROGRAM --serve`.
+    pub serves: bool,
     /// The file as registered: (size, modification time, inode).
     stamp: Option<(u64, SystemTime, u64)>,
 }
@@ -236,7 +245,7 @@ impl Program {
                 Err(e) => return Err(bad(e.to_string())),
             }
         }
-        let version = version_line(&path).await;
+        let (version, serves) = version_line(&path).await.unzip();
         h.update(version.as_deref().unwrap_or("").as_bytes());
         let d = h.finalize();
         let mut b = [0u8; 8];
@@ -246,6 +255,7 @@ impl Program {
             path,
             version,
             identity: u64::from_le_bytes(b),
+            serves: serves.unwrap_or(false),
             stamp: Some(stamp),
         })
     }
@@ -285,10 +295,10 @@ fn stamp(meta: &std::fs::Metadata) -> (u64, SystemTime, u64) {
     )
 }
 
-/// The first line of `path --version`, if it says one with exit 0 in time:
-/// run as a job (a clean environment, killed whole), its output read up to
-/// a few KiB.
-async fn version_line(path: &Path) -> Option<String> {
+/// The first line of `path --version`, if it says one with exit 0 in time,
+/// and whether a later line is [`SERVE_LINE`]: run as a job (a clean
+/// environment, killed whole), its output read up to a few KiB.
+async fn version_line(path: &Path) -> Option<(String, bool)> {
     let dir = std::env::temp_dir();
     let env = Settings::default().env_for(&dir);
     let mut job =
@@ -312,8 +322,10 @@ async fn version_line(path: &Path) -> Option<String> {
         return None;
     }
     let text = String::from_utf8_lossy(&out);
-    let line = text.lines().next()?.trim();
-    (!line.is_empty()).then(|| line.chars().take(200).collect())
+    let mut lines = text.lines();
+    let line = lines.next()?.trim();
+    let serves = lines.any(|l| l.trim() == SERVE_LINE);
+    (!line.is_empty()).then(|| (line.chars().take(200).collect(), serves))
 }
 
 /// What a program reads on its standard input: one trial.
@@ -361,7 +373,10 @@ pub struct ProgramMeasurement {
 /// Reads a pipe to its end, keeping its last `keep` bytes or a little more
 /// (a program may write as much as it likes: it is never left blocked on a
 /// full pipe).
-async fn read_tail(pipe: &mut (impl tokio::io::AsyncRead + Unpin), keep: usize) -> Vec<u8> {
+pub(crate) async fn read_tail(
+    pipe: &mut (impl tokio::io::AsyncRead + Unpin),
+    keep: usize,
+) -> Vec<u8> {
     let mut buf = Vec::new();
     let mut chunk = [0u8; 8192];
     while let Ok(n) = pipe.read(&mut chunk).await {
@@ -377,7 +392,7 @@ async fn read_tail(pipe: &mut (impl tokio::io::AsyncRead + Unpin), keep: usize) 
 }
 
 /// The last `STDERR_TAIL` bytes of `err`, as text on one line.
-fn tail(err: &[u8]) -> String {
+pub(crate) fn tail(err: &[u8]) -> String {
     let text = String::from_utf8_lossy(err);
     let lines: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
     let mut out = lines[lines.len().saturating_sub(5)..].join(" | ");
@@ -421,24 +436,9 @@ pub fn read_answer(stdout: &[u8], req: &TrialRequest) -> Result<Measurement, Str
     Ok(m)
 }
 
-/// Runs one trial of `program` in `slot` as a job: the trial on its
-/// standard input, its measurement from its standard output; any failure,
-/// with why. When `stop` is cancelled the program is asked to stop
-/// (SIGTERM, then SIGKILL after the settings' grace) and the trial fails
-/// with "the worker is stopping".
-pub async fn run(
-    program: &Program,
-    req: &TrialRequest,
-    slot: u32,
-    scratch: &Path,
-    settings: &Settings,
-    stop: &tokio_util::sync::CancellationToken,
-) -> Result<Measurement, String> {
-    let who = format!("program `{}`", program.name);
-    if stop.is_cancelled() {
-        return Err(format!("the worker is stopping; {who} was not started"));
-    }
-    let input = ProgramTrial {
+/// What `program` reads for `req` in `slot`.
+fn trial_input(req: &TrialRequest, slot: u32, scratch: &Path) -> ProgramTrial {
+    ProgramTrial {
         run: req.run.clone(),
         iteration: req.iteration,
         trial: req.trial,
@@ -448,8 +448,11 @@ pub async fn run(
         params: req.params.iter().cloned().collect(),
         slot,
         scratch: scratch.to_path_buf(),
-    };
-    let input = serde_json::to_vec(&input).map_err(|e| format!("{who}: the trial: {e}"))?;
+    }
+}
+
+/// Makes the slot's scratch with its HOME and TMPDIR.
+pub(crate) fn make_scratch(who: &str, scratch: &Path) -> Result<(), String> {
     for d in [
         scratch.to_path_buf(),
         scratch.join("home"),
@@ -457,6 +460,79 @@ pub async fn run(
     ] {
         std::fs::create_dir_all(&d).map_err(|e| format!("{who}: scratch {}: {e}", d.display()))?;
     }
+    Ok(())
+}
+
+/// Why a program that ended with `status` (not success) failed its trial.
+pub(crate) fn exit_failure(
+    who: &str,
+    status: std::process::ExitStatus,
+    err: &[u8],
+    settings: &Settings,
+) -> String {
+    let how = status.code().map_or_else(
+        || "was killed by a signal".to_string(),
+        |c| format!("exited with status {c}"),
+    );
+    let limit = settings
+        .limits
+        .hit(status, &String::from_utf8_lossy(err))
+        .map(|l| format!(": {l}"))
+        .unwrap_or_default();
+    format!("{who} {how}{limit}; {}", tail(err))
+}
+
+/// Why a trial that got no answer within the settings' time-out failed.
+pub(crate) fn timeout_failure(who: &str, err: &[u8], settings: &Settings) -> String {
+    format!(
+        "{who} did not answer within {} s; it and every process it started were killed; {}",
+        settings.timeout.as_secs_f64(),
+        tail(err)
+    )
+}
+
+/// Runs one trial of `program` in `slot`: the trial on its standard input,
+/// its measurement from its standard output; any failure, with why. A
+/// program that serves trials answers it in the process kept for the run in
+/// this slot, from `pool` ([`crate::served`]), unless a CPU-time limit is
+/// set (it bounds one trial, so each trial is a process of its own); any
+/// other runs as a job of its own. When `stop` is cancelled the program is
+/// asked to stop (SIGTERM, then SIGKILL after the settings' grace) and the
+/// trial fails with "the worker is stopping".
+pub async fn run(
+    program: &Program,
+    req: &TrialRequest,
+    slot: u32,
+    scratch: &Path,
+    settings: &Settings,
+    stop: &tokio_util::sync::CancellationToken,
+    pool: &crate::served::Pool,
+) -> Result<Measurement, String> {
+    let who = format!("program `{}`", program.name);
+    if stop.is_cancelled() {
+        return Err(format!("the worker is stopping; {who} was not started"));
+    }
+    let input = serde_json::to_vec(&trial_input(req, slot, scratch))
+        .map_err(|e| format!("{who}: the trial: {e}"))?;
+    make_scratch(&who, scratch)?;
+    if program.serves && settings.limits.cpu_s.is_none() {
+        return pool
+            .run(program, req, &input, slot, scratch, settings, stop)
+            .await;
+    }
+    run_once(&who, req, input, program, scratch, settings, stop).await
+}
+
+/// Runs one trial as a job of its own.
+async fn run_once(
+    who: &str,
+    req: &TrialRequest,
+    input: Vec<u8>,
+    program: &Program,
+    scratch: &Path,
+    settings: &Settings,
+    stop: &tokio_util::sync::CancellationToken,
+) -> Result<Measurement, String> {
     let env = settings.env_for(scratch);
     let mut job = Job::start(&program.path, scratch, &env, &settings.limits)
         .map_err(|e| format!("{who} did not start: {e}"))?;
@@ -504,26 +580,11 @@ pub async fn run(
                 tail(&err)
             ));
         }
-        End::TimedOut => {
-            return Err(format!(
-                "{who} did not answer within {} s; it and every process it started were killed; {}",
-                settings.timeout.as_secs_f64(),
-                tail(&err)
-            ));
-        }
+        End::TimedOut => return Err(timeout_failure(who, &err, settings)),
         End::Exited(s) => s.map_err(|e| format!("{who}: {e}"))?,
     };
     if !status.success() {
-        let how = status.code().map_or_else(
-            || "was killed by a signal".to_string(),
-            |c| format!("exited with status {c}"),
-        );
-        let limit = settings
-            .limits
-            .hit(status, &String::from_utf8_lossy(&err))
-            .map(|l| format!(": {l}"))
-            .unwrap_or_default();
-        return Err(format!("{who} {how}{limit}; {}", tail(&err)));
+        return Err(exit_failure(who, status, &err, settings));
     }
     read_answer(&out, req).map_err(|e| format!("{who} {e}; {}", tail(&err)))
 }

@@ -19,6 +19,7 @@
 
 use std::{
     collections::{BTreeMap, BTreeSet},
+    sync::Arc,
     time::{Duration, Instant},
 };
 
@@ -275,12 +276,14 @@ async fn run_program(
     run_dir: std::path::PathBuf,
     settings: crate::program::Settings,
     stop: tokio_util::sync::CancellationToken,
+    pool: Arc<crate::served::Pool>,
 ) -> (Result<crate::Measurement, String>, f64) {
     let started = Instant::now();
     let r = match crate::job::Slot::claim() {
         Ok(slot) => {
             let dir = run_dir.join(format!("slot-{}", slot.n));
-            let r = crate::program::run(&program, &req, slot.n, &dir, &settings, &stop).await;
+            let r =
+                crate::program::run(&program, &req, slot.n, &dir, &settings, &stop, &pool).await;
             // The slot's scratch is kept for the run's next trial in it.
             drop(slot);
             r
@@ -428,6 +431,8 @@ pub async fn serve(
     // Each run's program (from its adverts), and the task of each program trial.
     let mut run_program_of: BTreeMap<String, String> = BTreeMap::new();
     let mut program_tasks: BTreeMap<Held, tokio::task::JoinHandle<()>> = BTreeMap::new();
+    // Programs that serve, kept running between their run's trials.
+    let kept = Arc::new(crate::served::Pool::default());
     // The fingerprint this worker asks and answers `run` with.
     let fingerprint_for = |programs: &crate::program::Programs, program: Option<&String>| {
         program
@@ -536,8 +541,9 @@ pub async fn serve(
                             let settings = programs.settings.clone();
                             let stop = stop_programs.clone();
                             let k = key.clone();
+                            let pool = kept.clone();
                             let task = tokio::spawn(async move {
-                                let (r, wall) = run_program(program, req, run_dir, settings, stop).await;
+                                let (r, wall) = run_program(program, req, run_dir, settings, stop, pool).await;
                                 let _ = tx.send(Done::Trial(k, r, wall));
                             });
                             program_tasks.insert(key, task);
@@ -602,6 +608,7 @@ pub async fn serve(
                     .collect();
                 for r in ended {
                     run_program_of.remove(&r);
+                    kept.end_run(&r).await;
                     let Some(dir) = scratch.as_ref().map(|s| s.path().join(&r)) else {
                         continue;
                     };
@@ -703,6 +710,7 @@ pub async fn serve(
             tracing::warn!("a program trial did not end within its grace");
         }
     }
+    kept.stop_all(programs.settings.grace).await;
     // Only this worker ever wrote there (its id is in the name).
     drop(scratch);
     tracing::info!(worker = %id, trials = summary.trials, "worker stopped");

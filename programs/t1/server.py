@@ -1,8 +1,8 @@
-#!/usr/bin/env python3
-"""rcssservermj with a trial's T1: the server's own main, with its robot
-loader wrapped so that the T1's MuJoCo spec is edited before the robot
-joins. The edits come as JSON in NAOFARM_T1_BODY (all optional, factors
-of the stock T1's):
+"""rcssservermj with a trial's T1, for t1-trial: the server's own main,
+with its robot loader wrapped so that the T1's MuJoCo spec is edited before
+the robot joins. `warm_up` imports what the server needs without starting
+one; `run` starts it (it never returns). The edits (all optional, factors of
+the stock T1's):
 
   thigh, shank   the segment's length (hip to knee, knee to ankle), with
                  its collision capsule; the torso spawns higher or lower
@@ -11,12 +11,8 @@ of the stock T1's):
   trunk_mass     the torso's mass and inertia
   friction       the feet's sliding friction
   motor          every joint's torque range (the motors' strength)
-
-Arguments are the server's own (rcssservermj --help).
 """
 
-import json
-import os
 import sys
 
 import rcsssmj.resources.spec_provider as provider
@@ -60,8 +56,24 @@ def edit(spec, e):
     return spec
 
 
-def main():
-    edits = json.loads(os.environ.get("NAOFARM_T1_BODY", "{}"))
+def warm_up():
+    """Imports the server's modules (but not its main, which sets up logging
+    into the working directory when imported) and compiles the stock T1 once,
+    which fills MuJoCo's cache of processed meshes: a trial's server, forked
+    from here, compiles its T1 in a third of the time."""
+    import mujoco  # noqa: F401
+    import rcsssmj.games.soccer.server.soccer_server  # noqa: F401
+    import rcsssmj.games.soccer.sim.soccer_referee  # noqa: F401
+    import rcsssmj.games.soccer.sim.soccer_sim  # noqa: F401
+    import rcsssmj.games.soccer.soccer_fields  # noqa: F401
+    import rcsssmj.games.soccer.soccer_rules  # noqa: F401
+
+    provider.ModelSpecProvider().load_robot_spec("T1").compile()
+
+
+def run(args, edits):
+    """Runs the server with `args` (rcssservermj's own), its T1 edited by
+    `edits`, until it is killed."""
     load = provider.ModelSpecProvider.load_robot_spec
 
     def load_edited(self, robot, variant=None):
@@ -71,9 +83,5 @@ def main():
     provider.ModelSpecProvider.load_robot_spec = load_edited
     from rcsssmj.__main__ import soccer_sim
 
-    sys.argv = ["rcssservermj", *sys.argv[1:]]
+    sys.argv = ["rcssservermj", *args]
     soccer_sim()
-
-
-if __name__ == "__main__":
-    main()
