@@ -1,7 +1,8 @@
 //! The league's own server on the farm: programs/league/build.sh builds
 //! SimSpark, rcssserver3d and UT Austin Villa's agent from the third-party
 //! sources (into a cache outside the clone: a machine that keeps its files
-//! builds once), and a farm run of the `league` program on the real server
+//! builds once; without sources it fetches the pinned upstream ones and
+//! checks them), and a farm run of the `league` program on the real server
 //! is journaled, killed mid-run and resumed.
 #![allow(clippy::unwrap_used)]
 
@@ -13,7 +14,7 @@ use std::{
     time::Duration,
 };
 
-use util::{naofarm, scratch, succeed};
+use util::{naofarm, root, scratch, succeed};
 
 /// The league build's trial program, building it if the cache lacks it.
 /// The sources: `$NAOFARM_LEAGUE_SOURCE`, else ../shared/third-party.
@@ -171,4 +172,156 @@ fn a_league_run_on_the_real_server_is_journaled_killed_and_resumed() {
     for k in ["s", "mx", "my"] {
         assert_eq!(rows[0][k], stats[k], "{k} of iteration 0");
     }
+}
+
+/// A web server on loopback (python's http.server) serving `dir`; killed
+/// when dropped.
+struct Mirror {
+    child: std::process::Child,
+    url: String,
+}
+
+impl Mirror {
+    fn serve(dir: &Path) -> Self {
+        let mut child = Command::new("python3")
+            .args([
+                "-u",
+                "-m",
+                "http.server",
+                "0",
+                "--bind",
+                "127.0.0.1",
+                "--directory",
+            ])
+            .arg(dir)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        std::io::BufRead::read_line(
+            &mut std::io::BufReader::new(child.stdout.take().unwrap()),
+            &mut line,
+        )
+        .unwrap();
+        // "Serving HTTP on 127.0.0.1 port 40123 (http://127.0.0.1:40123/) ..."
+        let port = line
+            .split_whitespace()
+            .skip_while(|w| *w != "port")
+            .nth(1)
+            .unwrap_or_else(|| panic!("no port in {line:?}"));
+        Self {
+            child,
+            url: format!("http://127.0.0.1:{port}"),
+        }
+    }
+}
+
+impl Drop for Mirror {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// The pinned sources as build.sh names them and fetches them from a mirror.
+const UPSTREAM: [(&str, &str); 2] = [
+    (
+        "simspark-0.3.2-rcssserver3d-0.7.3.tar.gz",
+        "zzufootball/SIMSPARK/archive/f6934a6.tar.gz",
+    ),
+    (
+        "utaustinvilla3d.tar.gz",
+        "LARG/utaustinvilla3d/archive/dbb2fb3.tar.gz",
+    ),
+];
+
+/// build.sh without SOURCE, in `cache`, fetching from `mirror`.
+fn build_fetching(cache: &Path, mirror: &str) -> std::process::Output {
+    Command::new(root().join("programs/league/build.sh"))
+        .env("NAOFARM_LEAGUE_CACHE", cache)
+        .env("NAOFARM_LEAGUE_MIRROR", mirror)
+        .output()
+        .unwrap()
+}
+
+/// Without SOURCE, build.sh fetches the pinned upstream sources (here from
+/// a mirror on loopback serving the third-party ones), checks their files'
+/// sha256 and builds from them — here it finds the build of the same
+/// sources, as a machine that built them keeps it. Fetched once, they serve
+/// offline. A mirror serving other sources is refused before anything is
+/// built, and what it served is not kept.
+#[test]
+fn without_sources_the_build_fetches_the_pinned_ones_and_refuses_others() {
+    let program = league_program();
+    let built = program.parent().unwrap().parent().unwrap();
+    let key = built.file_name().unwrap();
+    let source = util::third_party("NAOFARM_LEAGUE_SOURCE");
+    let dir = scratch("league-fetch");
+    let site = dir.join("site");
+    for (file, path) in UPSTREAM {
+        let to = site.join(path);
+        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+        std::fs::copy(source.join(file), to).unwrap();
+    }
+    let cache = dir.join("cache");
+    std::fs::create_dir_all(&cache).unwrap();
+    std::os::unix::fs::symlink(built, cache.join(key)).unwrap();
+
+    let mirror = Mirror::serve(&site);
+    let out = build_fetching(&cache, &mirror.url);
+    let (said, err) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert!(out.status.success(), "{said}{err}");
+    assert_eq!(said.matches("fetching").count(), 2, "{said}");
+    assert_eq!(
+        PathBuf::from(said.lines().last().unwrap()),
+        cache.join(key).join("bin/league-trial"),
+        "{said}"
+    );
+    drop(mirror);
+    let offline = build_fetching(&cache, "http://127.0.0.1:9");
+    let said = String::from_utf8_lossy(&offline.stdout);
+    assert!(offline.status.success(), "{said}");
+    assert!(!said.contains("fetching"), "{said}");
+
+    // Another UT tree where the pinned one should be.
+    let other = dir.join("other/utaustinvilla3d");
+    std::fs::create_dir_all(&other).unwrap();
+    std::fs::write(other.join("README.md"), "not UT's code\n").unwrap();
+    succeed(
+        Command::new("tar")
+            .arg("-czf")
+            .arg(site.join(UPSTREAM[1].1))
+            .arg("-C")
+            .arg(dir.join("other"))
+            .arg("utaustinvilla3d"),
+    );
+    let mirror = Mirror::serve(&site);
+    let cache = dir.join("cache-2");
+    let out = build_fetching(&cache, &mirror.url);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains(&format!(
+            "{}/{} is not the pinned source",
+            mirror.url, UPSTREAM[1].1
+        )),
+        "{err}"
+    );
+    let kept: Vec<_> = std::fs::read_dir(cache.join("sources"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(kept, [UPSTREAM[0].0], "only the pinned source is kept");
+    assert!(
+        !std::fs::read_dir(&cache)
+            .unwrap()
+            .flatten()
+            .any(|e| e.file_name().to_string_lossy().starts_with(".work")),
+        "nothing was built"
+    );
 }

@@ -59,7 +59,15 @@ fn trial(name: &str, timeout: Duration) -> Result<protocol::measurement::Measure
     };
     let stop = tokio_util::sync::CancellationToken::new();
     let pool = worker::served::Pool::default();
-    rt.block_on(run(&p, &req, 1, &dir.join("slot-1"), &settings, &stop, &pool))
+    rt.block_on(run(
+        &p,
+        &req,
+        1,
+        &dir.join("slot-1"),
+        &settings,
+        &stop,
+        &pool,
+    ))
 }
 
 #[test]

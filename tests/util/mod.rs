@@ -277,8 +277,7 @@ pub fn wait_for<T>(
 /// `programs/NAME/SCRIPT SOURCE` must succeed, and the program is the last
 /// line it prints. The sources: `$VAR`, else ../shared/third-party.
 pub fn set_up_program(script: &str, var: &str) -> PathBuf {
-    let source =
-        std::env::var_os(var).map_or_else(|| root().join("../shared/third-party"), PathBuf::from);
+    let source = third_party(var);
     assert!(
         source.is_dir(),
         "the sources for {script} are not at {} (set {var} to their directory)",
@@ -289,6 +288,11 @@ pub fn set_up_program(script: &str, var: &str) -> PathBuf {
     let program = PathBuf::from(stdout.lines().last().unwrap().trim());
     assert!(program.is_file(), "{}", program.display());
     program
+}
+
+/// The third-party sources: `$VAR`, else ../shared/third-party.
+pub fn third_party(var: &str) -> PathBuf {
+    std::env::var_os(var).map_or_else(|| root().join("../shared/third-party"), PathBuf::from)
 }
 
 /// `naofarm run --json --workers 2 EXP --out OUT --program NAME=PROGRAM`.
