@@ -72,6 +72,14 @@ pub fn worker(
                 "trial programs run as jobs contained by {}",
                 worker::job::Host::get().describe()
             );
+            for p in wcfg.programs.by_name.values() {
+                let kept = if p.serves && wcfg.programs.settings.limits.cpu_s.is_none() {
+                    "kept in its slot between a run's trials (it serves)"
+                } else {
+                    "started for each trial"
+                };
+                eprintln!("program `{}`: {kept}", p.name);
+            }
         }
         let session = open_session(cfg, "worker", &net.connect).await?;
         let shutdown = signals();
