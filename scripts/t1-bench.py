@@ -27,6 +27,7 @@ import importlib.util
 import json
 import os
 import resource
+import socket
 import statistics
 import subprocess
 import sys
@@ -55,6 +56,14 @@ def process_cpu(pid):
     return sum(int(v) for v in fields[11:15]) / os.sysconf("SC_CLK_TCK")
 
 
+def free_port():
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
 def load_program(program):
     """The trial program as a module: its walker and policy."""
     sys.path.insert(0, os.path.dirname(program))
@@ -75,7 +84,7 @@ def server_walk(t1, policy, scratch, seed):
     first perception to the end."""
     import numpy as np
 
-    port, monitor = t1.free_port(), t1.free_port()
+    port, monitor = free_port(), free_port()
     rcssservermj = os.path.join(t1.PREFIX, "venv", "bin", "rcssservermj")
     server = subprocess.Popen(
         [rcssservermj, "--host", "127.0.0.1", "--aport", str(port), "--mport", str(monitor),

@@ -71,9 +71,20 @@ def warm_up():
     provider.ModelSpecProvider().load_robot_spec("T1").compile()
 
 
-def run(args, edits):
+def run(args, edits, sockets):
     """Runs the server with `args` (rcssservermj's own), its T1 edited by
-    `edits`, until it is killed."""
+    `edits`, until it is killed. Its listeners adopt `sockets` (listening
+    sockets by port, made by the caller) instead of binding their ports."""
+    from rcsssmj.server.communication.tcp_connection_listener import TCPConnectionListener
+
+    bind = TCPConnectionListener.bind
+
+    def adopt(self):
+        if self._sock is None and self.port in sockets:
+            self._sock = sockets[self.port]
+        bind(self)
+
+    TCPConnectionListener.bind = adopt
     load = provider.ModelSpecProvider.load_robot_spec
 
     def load_edited(self, robot, variant=None):
