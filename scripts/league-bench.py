@@ -19,7 +19,6 @@ PROGRAM is the league build's trial program (the last line build.sh prints).
 import argparse
 import json
 import os
-import resource
 import socket
 import subprocess
 import sys
@@ -27,12 +26,9 @@ import tempfile
 import time
 
 HERE = os.path.dirname(os.path.realpath(__file__))
-ROOT = os.path.dirname(os.path.dirname(HERE))
-
-
-def children_cpu():
-    r = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return r.ru_utime + r.ru_stime
+sys.path.insert(0, HERE)
+from farm_bench import children_cpu, farm  # noqa: E402
+ROOT = os.path.dirname(HERE)
 
 
 def trial_input(scratch, duration, params=None):
@@ -116,23 +112,6 @@ def program_trials(program, trials, duration):
     return sum(walls) / trials, sum(cpus) / trials
 
 
-def farm(naofarm, program, iterations, workers):
-    with tempfile.TemporaryDirectory() as d:
-        exp = os.path.join(d, "league.toml")
-        with open(os.path.join(ROOT, "experiments", "league.toml"), encoding="utf-8") as f:
-            text = f.read().replace("iterations = 150", f"iterations = {iterations}")
-        with open(exp, "w", encoding="utf-8") as f:
-            f.write(text)
-        c0, t0 = children_cpu(), time.monotonic()
-        out = subprocess.run(
-            [naofarm, "run", exp, "--out", os.path.join(d, "run"), "--json",
-             "--workers", str(workers), "--program", f"league={program}"],
-            capture_output=True, text=True, check=True)
-        wall, cpu = time.monotonic() - t0, children_cpu() - c0
-    trials = sum(1 for l in out.stdout.splitlines() if l.startswith('{"event":"decided"')) * 10
-    return trials, wall, cpu
-
-
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("program")
@@ -145,7 +124,7 @@ def main():
     duration = 10.0
     first, per_walk = server_walks(a.program, a.walks, duration)
     wall, cpu = program_trials(a.program, a.trials, duration)
-    n, fwall, fcpu = farm(a.naofarm, a.program, a.iterations, a.workers)
+    n, fwall, fcpu = farm(a.naofarm, "league", f"league={a.program}", a.iterations, a.workers)
     cores = os.cpu_count() or 1
     print(f"server's own sync mode: {per_walk:.2f} s per {duration:.0f}-s walk "
           f"({duration / per_walk:.1f}x real time); the first walk after the agent "

@@ -35,13 +35,10 @@ import tempfile
 import time
 
 HERE = os.path.dirname(os.path.realpath(__file__))
+sys.path.insert(0, HERE)
+from farm_bench import children_cpu, farm  # noqa: E402
 ROOT = os.path.dirname(HERE)
 DURATION = 10.0
-
-
-def children_cpu():
-    r = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return r.ru_utime + r.ru_stime
 
 
 def own_cpu():
@@ -143,24 +140,6 @@ class Kept:
         self.p.wait()
 
 
-def farm(naofarm, program, iterations, workers):
-    with tempfile.TemporaryDirectory() as d:
-        exp = os.path.join(d, "t1.toml")
-        with open(os.path.join(ROOT, "experiments", "t1.toml"), encoding="utf-8") as f:
-            text = f.read().replace("iterations = 300", f"iterations = {iterations}")
-        with open(exp, "w", encoding="utf-8") as f:
-            f.write(text)
-        c0, t0 = children_cpu(), time.monotonic()
-        out = subprocess.run(
-            [naofarm, "run", exp, "--out", os.path.join(d, "run"), "--json",
-             "--workers", str(workers), "--program", f"t1={program}"],
-            capture_output=True, text=True, check=True)
-        wall, cpu = time.monotonic() - t0, children_cpu() - c0
-    trials = sum(1 for line in out.stdout.splitlines()
-                 if line.startswith('{"event":"decided"')) * 10
-    return trials, wall, cpu
-
-
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n", 1)[0])
     ap.add_argument("program")
@@ -197,7 +176,7 @@ def main():
           f"({kept_w / own_w:.2f}x the walk's wall, {kept_c / own_c:.2f}x its CPU); "
           f"its start and first trial {start:.2f} s; answers equal to the fresh ones'")
     if a.iterations > 0:
-        n, fwall, fcpu = farm(a.naofarm, program, a.iterations, a.workers)
+        n, fwall, fcpu = farm(a.naofarm, "t1", f"t1={program}", a.iterations, a.workers)
         cores = min(a.workers, os.cpu_count() or 1)
         print(f"farm, {a.workers} workers:         {n} trials in {fwall:.1f} s: "
               f"{n / fwall:.3f} trials/s, {n / fwall / cores:.3f} per core; "

@@ -41,21 +41,7 @@ fn served(program: &Path, trials: &[(u64, serde_json::Value)]) -> Vec<serde_json
         .iter()
         .map(|(seed, params)| format!("{}\n", input(&dir, *seed, 10.0, params)))
         .collect();
-    let mut child = Command::new(program)
-        .arg("--serve")
-        .current_dir(&*dir)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    child
-        .stdin
-        .take()
-        .unwrap()
-        .write_all(lines.as_bytes())
-        .unwrap();
-    let out = child.wait_with_output().unwrap();
+    let out = fed(Command::new(program).arg("--serve"), &dir, &lines);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{err}");
     String::from_utf8_lossy(&out.stdout)
@@ -73,8 +59,13 @@ fn answer(
 ) -> std::process::Output {
     let dir = scratch("t1-trial");
     let input = input(&dir, seed, duration_s, params);
-    let mut child = Command::new(program)
-        .current_dir(&*dir)
+    fed(&mut Command::new(program), &dir, &input.to_string())
+}
+
+/// `cmd` run in `dir` with `stdin` on its standard input, to its end.
+fn fed(cmd: &mut Command, dir: &Path, stdin: &str) -> std::process::Output {
+    let mut child = cmd
+        .current_dir(dir)
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -84,7 +75,7 @@ fn answer(
         .stdin
         .take()
         .unwrap()
-        .write_all(input.to_string().as_bytes())
+        .write_all(stdin.as_bytes())
         .unwrap();
     child.wait_with_output().unwrap()
 }
