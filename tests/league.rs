@@ -325,3 +325,76 @@ fn without_sources_the_build_fetches_the_pinned_ones_and_refuses_others() {
         "nothing was built"
     );
 }
+
+/// The same trials of the league program, each on a fresh server (cold)
+/// and one after another on one kept server (`league-trial --serve`, as a
+/// worker keeps it): their walks as (x, fell).
+fn cold_and_kept(program: &Path, trials: &[serde_json::Value]) -> (Vec<f64>, Vec<f64>) {
+    let dir = scratch("league-kept");
+    let doc = |t: &serde_json::Value| {
+        let mut t = t.clone();
+        t["scratch"] = serde_json::json!(dir.to_path_buf());
+        t.to_string()
+    };
+    let x = |line: &str| {
+        let m: serde_json::Value = serde_json::from_str(line).unwrap();
+        assert_eq!(m["fell"], false, "{m}");
+        m["x_m"].as_f64().unwrap()
+    };
+    let fed = |args: &[&str], input: String| {
+        let mut child = Command::new(program)
+            .args(args)
+            .current_dir(&*dir)
+            .stdin(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        std::io::Write::write_all(&mut child.stdin.take().unwrap(), input.as_bytes()).unwrap();
+        let out = child.wait_with_output().unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let cold = trials
+        .iter()
+        .map(|t| x(fed(&[], doc(t)).lines().last().unwrap()))
+        .collect();
+    let lines: String = trials.iter().map(|t| doc(t) + "\n").collect();
+    let kept = fed(&["--serve"], lines).lines().map(x).collect();
+    (cold, kept)
+}
+
+/// A kept server carries nothing from one trial into the next: the same
+/// trials walk as far on it as on fresh servers, within the spread of
+/// fresh servers' repeats (the server's physics is not seeded, so a walk
+/// repeats within a few centimetres), whatever body walked before.
+#[test]
+fn a_kept_league_server_walks_the_trials_a_fresh_one_walks() {
+    let program = league_program();
+    let trial = |thigh: f64, step: f64| {
+        serde_json::json!({
+            "run": "r", "iteration": 0, "trial": 0, "seed": 1, "duration_s": 10.0,
+            "robot_type": 0, "slot": 0,
+            "params": {"ThighRelHip2_Z": thigh, "utwalk_max_step_size_x": step},
+        })
+    };
+    // The expert, a longer thigh with longer steps, the expert again.
+    let trials = [
+        trial(-0.04, 97.34),
+        trial(-0.05, 115.0),
+        trial(-0.04, 97.34),
+    ];
+    let (cold, kept) = cold_and_kept(&program, &trials);
+    for (i, (c, k)) in cold.iter().zip(&kept).enumerate() {
+        assert!((c - k).abs() <= 0.1, "trial {i}: {c} m fresh, {k} m kept");
+    }
+    // The body is the trial's: the longer thigh walks another walk.
+    assert!(
+        (kept[1] - kept[0]).abs() > 0.1,
+        "the kept server's bodies: {kept:?}"
+    );
+}
