@@ -3,10 +3,14 @@
 
   1. the server's own sync-mode speed: one agent walking N walks of D s on
      one server (UT's own optimisation loop), seconds per walk;
-  2. the trial program alone (programs/league/league-trial): one walk per
-     start of the server and the agent, as the farm runs it, wall and CPU
-     seconds per trial (CPU of the program and everything it started);
-  3. the farm: `naofarm run` of experiments/league.toml cut to a few
+  2. the trial program started for each trial (programs/league/league-trial):
+     a server and an agent per walk, wall and CPU seconds per trial (CPU of
+     the program and everything it started), and the walks' spread;
+  3. the trial program kept between trials (`league-trial --serve`, as a
+     worker runs it): one server, an agent per walk; the same figures, and
+     the same trials' spread, which must match the fresh one's (nothing
+     carried over);
+  4. the farm: `naofarm run` of experiments/league.toml cut to a few
      iterations, with W local workers (one slot each): trials per second,
      and per core.
 
@@ -20,6 +24,7 @@ import argparse
 import json
 import os
 import socket
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -27,16 +32,19 @@ import time
 
 HERE = os.path.dirname(os.path.realpath(__file__))
 sys.path.insert(0, HERE)
-from farm_bench import children_cpu, farm  # noqa: E402
+from farm_bench import Kept, children_cpu, farm  # noqa: E402
 ROOT = os.path.dirname(HERE)
 
 
-def trial_input(scratch, duration, params=None):
-    return json.dumps({
-        "run": "bench", "iteration": 0, "trial": 0, "seed": 1,
-        "duration_s": duration, "robot_type": 0, "params": params or {},
+DURATION = 10.0
+
+
+def trial_doc(scratch, k):
+    return {
+        "run": "bench", "iteration": 0, "trial": k, "seed": k,
+        "duration_s": DURATION, "robot_type": 0, "params": {},
         "slot": 0, "scratch": scratch,
-    })
+    }
 
 
 def server_walks(program, walks, duration):
@@ -99,17 +107,22 @@ def server_walks(program, walks, duration):
     return first, per_walk
 
 
-def program_trials(program, trials, duration):
-    walls, cpus = [], []
+def program_trials(program, trials):
+    """Fresh and kept trials, interleaved: [(wall, CPU, x)] of each."""
+    fresh, kept = [], []
     with tempfile.TemporaryDirectory() as scratch:
-        for _ in range(trials):
+        served = Kept(program, scratch, trial_doc)
+        served.trial(0)  # its server's start
+        for k in range(1, trials + 1):
             c0, t0 = children_cpu(), time.monotonic()
-            out = subprocess.run([program], input=trial_input(scratch, duration), text=True,
+            out = subprocess.run([program], input=json.dumps(trial_doc(scratch, k)), text=True,
                                  capture_output=True, check=True)
-            walls.append(time.monotonic() - t0)
-            cpus.append(children_cpu() - c0)
-            json.loads(out.stdout.strip().splitlines()[-1])
-    return sum(walls) / trials, sum(cpus) / trials
+            x = json.loads(out.stdout.strip().splitlines()[-1])["x_m"]
+            fresh.append((time.monotonic() - t0, children_cpu() - c0, x))
+            wall, cpu, answer = served.trial(k)
+            kept.append((wall, cpu, json.loads(answer)["x_m"]))
+        served.close()
+    return fresh, kept
 
 
 def main():
@@ -121,21 +134,25 @@ def main():
     ap.add_argument("--iterations", type=int, default=6)
     ap.add_argument("--workers", type=int, default=2)
     a = ap.parse_args()
-    duration = 10.0
-    first, per_walk = server_walks(a.program, a.walks, duration)
-    wall, cpu = program_trials(a.program, a.trials, duration)
-    n, fwall, fcpu = farm(a.naofarm, "league", f"league={a.program}", a.iterations, a.workers)
-    cores = os.cpu_count() or 1
-    print(f"server's own sync mode: {per_walk:.2f} s per {duration:.0f}-s walk "
-          f"({duration / per_walk:.1f}x real time); the first walk after the agent "
-          f"starts {first:.2f} s (with UT's 3-s settle)")
-    print(f"trial program alone:    {wall:.2f} s wall, {cpu:.2f} s CPU per trial "
-          f"({wall / per_walk:.2f}x a walk in the server's loop)")
-    print(f"farm, {a.workers} workers:        {n} trials in {fwall:.1f} s: "
-          f"{n / fwall:.3f} trials/s, {n / fwall / min(a.workers, cores):.3f} per core; "
-          f"{fcpu / n:.2f} s CPU per trial (coordinator, workers and programs)")
-    print(f"farm overhead:          {a.workers / (n / fwall) - wall:.2f} s wall per trial per "
-          f"slot beyond the program's ({(a.workers / (n / fwall)) / wall:.3f}x)")
+    first, per_walk = server_walks(a.program, a.walks, DURATION)
+    fresh, kept = program_trials(a.program, a.trials)
+    print(f"server's own sync mode: {per_walk:.2f} s per {DURATION:.0f}-s walk "
+          f"({DURATION / per_walk:.1f}x real time); the first walk after the agent "
+          f"starts {first:.2f} s (both with UT's 3-s settle)")
+    for name, rows in (("fresh program per trial", fresh), ("kept program per trial ", kept)):
+        wall = statistics.median(r[0] for r in rows)
+        cpu = statistics.median(r[1] for r in rows)
+        xs = [r[2] for r in rows]
+        print(f"{name}: {wall:.2f} s wall, {cpu:.2f} s CPU ({wall / per_walk:.2f}x a walk "
+              f"in the server's loop); x {statistics.mean(xs):.3f} m, "
+              f"sd {statistics.stdev(xs):.3f} m over {len(xs)} walks")
+    if a.iterations > 0:
+        n, fwall, fcpu = farm(a.naofarm, "league", f"league={a.program}", a.iterations,
+                              a.workers)
+        cores = min(a.workers, os.cpu_count() or 1)
+        print(f"farm, {a.workers} workers:       {n} trials in {fwall:.1f} s: "
+              f"{n / fwall:.3f} trials/s, {n / fwall / cores:.3f} per core; "
+              f"{fcpu / n:.2f} s CPU per trial (coordinator, workers and programs)")
 
 
 if __name__ == "__main__":

@@ -36,7 +36,7 @@ import time
 
 HERE = os.path.dirname(os.path.realpath(__file__))
 sys.path.insert(0, HERE)
-from farm_bench import children_cpu, farm  # noqa: E402
+from farm_bench import Kept, children_cpu, farm, tree_cpu  # noqa: E402
 ROOT = os.path.dirname(HERE)
 DURATION = 10.0
 
@@ -44,13 +44,6 @@ DURATION = 10.0
 def own_cpu():
     r = resource.getrusage(resource.RUSAGE_SELF)
     return r.ru_utime + r.ru_stime
-
-
-def process_cpu(pid):
-    """CPU seconds of a live process and of its reaped children."""
-    with open(f"/proc/{pid}/stat", encoding="ascii") as f:
-        fields = f.read().rsplit(")", 1)[1].split()
-    return sum(int(v) for v in fields[11:15]) / os.sysconf("SC_CLK_TCK")
 
 
 def free_port():
@@ -99,13 +92,13 @@ def server_walk(t1, policy, scratch, seed):
         def recv():
             text = first()
             if not mark:
-                mark.update(t=time.perf_counter(), cpu=own_cpu(), server=process_cpu(server.pid))
+                mark.update(t=time.perf_counter(), cpu=own_cpu(), server=tree_cpu(server.pid))
             return text
 
         link.recv = recv
         t1.walk(link, policy, DURATION, dict(t1.WALK), np.random.default_rng(seed))
         wall = time.perf_counter() - mark["t"]
-        cpu = own_cpu() - mark["cpu"] + process_cpu(server.pid) - mark["server"]
+        cpu = own_cpu() - mark["cpu"] + tree_cpu(server.pid) - mark["server"]
     finally:
         server.kill()
         server.wait()
@@ -117,27 +110,6 @@ def fresh_trial(program, scratch, seed):
     out = subprocess.run([program], input=json.dumps(trial_doc(scratch, seed)), cwd=scratch,
                          capture_output=True, text=True, check=True)
     return time.perf_counter() - t0, children_cpu() - c0, out.stdout.splitlines()[-1]
-
-
-class Kept:
-    """The program kept between trials, as a worker keeps it."""
-
-    def __init__(self, program, scratch):
-        self.t0 = time.perf_counter()
-        self.p = subprocess.Popen([program, "--serve"], cwd=scratch, stdin=subprocess.PIPE,
-                                  stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-        self.scratch = scratch
-
-    def trial(self, seed):
-        cpu, t = process_cpu(self.p.pid), time.perf_counter()
-        self.p.stdin.write(json.dumps(trial_doc(self.scratch, seed)) + "\n")
-        self.p.stdin.flush()
-        answer = self.p.stdout.readline().strip()
-        return time.perf_counter() - t, process_cpu(self.p.pid) - cpu, answer
-
-    def close(self):
-        self.p.stdin.close()
-        self.p.wait()
 
 
 def main():
@@ -154,7 +126,7 @@ def main():
     policy = t1.nn.Policy(t1.WEIGHTS, t1.META)
     own, fresh, kept = [], [], []
     with tempfile.TemporaryDirectory() as scratch:
-        served = Kept(program, scratch)
+        served = Kept(program, scratch, trial_doc)
         start, _, _ = served.trial(0)
         for seed in range(1, a.rounds + 1):
             own.append(server_walk(t1, policy, scratch, seed))
