@@ -24,7 +24,7 @@ fn league_program() -> PathBuf {
 
 /// The league experiment cut to a test's size: 3 iterations of 4 walks of 4 s.
 fn small_league(dir: &Path) -> PathBuf {
-    util::small_experiment("league.toml", "iterations = 150", dir)
+    util::small_experiment("league.toml", "iterations = 500", dir)
 }
 
 fn run(exp: &Path, out: &Path, program: &Path) -> Command {
