@@ -152,7 +152,7 @@ def main():
         cores = min(a.workers, os.cpu_count() or 1)
         print(f"farm, {a.workers} workers:       {n} trials in {fwall:.1f} s: "
               f"{n / fwall:.3f} trials/s, {n / fwall / cores:.3f} per core; "
-              f"{fcpu / n:.2f} s CPU per trial (coordinator, workers and programs)")
+              f"{fcpu / n:.2f} s CPU per trial (the machine's, all of it)")
 
 
 if __name__ == "__main__":
