@@ -14,7 +14,9 @@
 //! [`run_trial`] is the one trial interface, a pure function of the request.
 //!
 //! This crate must not keep state between trials or decide anything about
-//! the optimisation: it runs what it is asked and reports what happened.
+//! the optimisation: it runs what it is asked and reports what happened. A
+//! program kept between trials ([`served`]) is a process it runs, not state
+//! it keeps: the program answers each trial as a fresh one would.
 #![warn(missing_docs)]
 
 pub mod fault;
