@@ -439,25 +439,46 @@ fn a_program_rewritten_mid_run_is_a_new_build_the_run_does_not_mix() {
 #[test]
 fn a_program_that_serves_is_kept_between_trials_and_ends_with_its_run() {
     let program = root().join("tests/programs/served");
-    let pid = |line: &str| line.split_whitespace().nth(1).unwrap().to_string();
     let farm = Farm::new("served");
     let (stdout, err) = finish(&mut farm.run(&program, "served", 1, 3, 4), 0);
     assert_eq!(util::events(stdout.as_bytes()).decided.len(), 3, "{err}");
     assert_eq!(util::journaled_once(&farm.out()).len(), 3 * 4, "{err}");
     let starts = farm.lines("starts");
-    assert_eq!(
-        starts.len(),
-        2,
-        "one process, and one after the junk: {starts:?}"
-    );
     assert!(starts.iter().all(|s| s.starts_with("serve ")), "{starts:?}");
-    let trials = farm.lines("trials");
+    let trials: Vec<Vec<String>> = farm
+        .lines("trials")
+        .iter()
+        .map(|l| l.split_whitespace().map(str::to_string).collect())
+        .collect();
     assert_eq!(trials.len(), 3 * 4 + 1, "{trials:?}");
-    let junked: Vec<&String> = trials.iter().filter(|t| t.starts_with("1-0 ")).collect();
-    assert_eq!(
-        junked.iter().map(|t| pid(t)).collect::<Vec<_>>(),
-        [pid(&starts[0]), pid(&starts[1])],
-        "the junked trial, asked again of a fresh process: {trials:?}"
+    // One process per slot the run's trials took (other tests' trials hold
+    // slots too), and one more after the junk; each answers in one slot.
+    let mut slot_of = std::collections::BTreeMap::new();
+    for t in &trials {
+        let slot = slot_of.entry(t[1].clone()).or_insert_with(|| t[2].clone());
+        assert_eq!(
+            *slot, t[2],
+            "process {} answered in two slots: {trials:?}",
+            t[1]
+        );
+    }
+    let slots: std::collections::BTreeSet<&String> = trials.iter().map(|t| &t[2]).collect();
+    assert_eq!(starts.len(), slot_of.len(), "{starts:?} {trials:?}");
+    assert!(
+        slot_of.len() <= slots.len() + 1 && slot_of.len() < trials.len(),
+        "kept per slot: {starts:?} {trials:?}"
+    );
+    // The junked trial, asked again of a fresh process; the one that
+    // printed junk answered nothing more.
+    let junked: Vec<usize> = (0..trials.len())
+        .filter(|&i| trials[i][0] == "1-0")
+        .collect();
+    assert_eq!(junked.len(), 2, "{trials:?}");
+    let junker = &trials[junked[0]][1];
+    assert_ne!(junker, &trials[junked[1]][1], "{trials:?}");
+    assert!(
+        trials[junked[0] + 1..].iter().all(|t| &t[1] != junker),
+        "the process that printed junk answered again: {trials:?}"
     );
     assert!(err.contains("not a measurement"), "{err}");
     farm.assert_clean();
