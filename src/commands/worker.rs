@@ -73,7 +73,7 @@ pub fn worker(
                 worker::job::Host::get().describe()
             );
             for p in wcfg.programs.by_name.values() {
-                let kept = if p.serves && wcfg.programs.settings.limits.cpu_s.is_none() {
+                let kept = if p.kept(&wcfg.programs.settings) {
                     "kept in its slot between a run's trials (it serves)"
                 } else {
                     "started for each trial"

@@ -42,7 +42,7 @@ const VERSION_WITHIN: Duration = Duration::from_secs(10);
 /// Bytes of a program's standard output kept (the measurement is its last line).
 const STDOUT_TAIL: usize = 64 << 10;
 /// Bytes of a program's standard error kept for a failure's reason.
-const STDERR_TAIL: usize = 600;
+pub(crate) const STDERR_TAIL: usize = 600;
 /// How long the pipes may stay open once the job is killed (on a host
 /// without a cgroup or a PID namespace, a process that left the job's group
 /// may hold them).
@@ -270,6 +270,14 @@ impl Program {
         Some(Self::register(&self.name, &self.path).await)
     }
 
+    /// Whether the worker keeps this program in its slot between a run's
+    /// trials: it serves, and no CPU-time limit (which bounds one trial)
+    /// asks for a process per trial.
+    #[must_use]
+    pub fn kept(&self, settings: &Settings) -> bool {
+        self.serves && settings.limits.cpu_s.is_none()
+    }
+
     /// The worker's fingerprint for this program's runs: its own, mixed with
     /// the program's identity.
     #[must_use]
@@ -373,10 +381,7 @@ pub struct ProgramMeasurement {
 /// Reads a pipe to its end, keeping its last `keep` bytes or a little more
 /// (a program may write as much as it likes: it is never left blocked on a
 /// full pipe).
-pub(crate) async fn read_tail(
-    pipe: &mut (impl tokio::io::AsyncRead + Unpin),
-    keep: usize,
-) -> Vec<u8> {
+async fn read_tail(pipe: &mut (impl tokio::io::AsyncRead + Unpin), keep: usize) -> Vec<u8> {
     let mut buf = Vec::new();
     let mut chunk = [0u8; 8192];
     while let Ok(n) = pipe.read(&mut chunk).await {
@@ -515,7 +520,7 @@ pub async fn run(
     let input = serde_json::to_vec(&trial_input(req, slot, scratch))
         .map_err(|e| format!("{who}: the trial: {e}"))?;
     make_scratch(&who, scratch)?;
-    if program.serves && settings.limits.cpu_s.is_none() {
+    if program.kept(settings) {
         return pool
             .run(program, req, &input, slot, scratch, settings, stop)
             .await;

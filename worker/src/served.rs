@@ -29,13 +29,11 @@ use tokio::{
 
 use crate::{
     job::Job,
-    program::{exit_failure, read_answer, tail, timeout_failure, Program, Settings},
+    program::{exit_failure, read_answer, tail, timeout_failure, Program, Settings, STDERR_TAIL},
 };
 
 /// Bytes an answer line may have.
 const LINE_BYTES: usize = 64 << 10;
-/// Bytes of standard error kept for a failure's reason.
-const STDERR_KEEP: usize = 1200;
 /// How long a program that closed its standard output has to exit.
 const EXIT_WITHIN: std::time::Duration = std::time::Duration::from_secs(2);
 
@@ -91,8 +89,8 @@ impl Served {
                 }
                 let mut k = kept.lock().unwrap_or_else(PoisonError::into_inner);
                 k.extend_from_slice(&chunk[..n]);
-                if k.len() > 2 * STDERR_KEEP {
-                    let cut = k.len() - STDERR_KEEP;
+                if k.len() > 4 * STDERR_TAIL {
+                    let cut = k.len() - 2 * STDERR_TAIL;
                     k.drain(..cut);
                 }
             }
@@ -272,14 +270,5 @@ impl Pool {
             let _ = tokio::time::timeout_at(deadline, s.job.child.wait()).await;
             s.job.end().await;
         }
-    }
-
-    /// How many processes are kept idle.
-    #[must_use]
-    pub fn idle(&self) -> usize {
-        self.idle
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .len()
     }
 }
