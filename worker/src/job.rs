@@ -726,18 +726,37 @@ pub struct Slot {
 impl Slot {
     /// The lowest slot number free on this host.
     pub fn claim() -> io::Result<Self> {
-        use std::os::linux::net::SocketAddrExt;
+        Self::claim_preferring(&[])
+    }
+
+    /// The first of `preferred` free on this host, else the lowest free
+    /// slot number. A worker prefers the slots it keeps programs in, so
+    /// that workers sharing a host do not each keep one in every slot.
+    pub fn claim_preferring(preferred: &[u32]) -> io::Result<Self> {
+        for &n in preferred {
+            if let Some(slot) = Self::bind(n)? {
+                return Ok(slot);
+            }
+        }
         for n in 0..65_536 {
-            let addr = SocketAddr::from_abstract_name(format!("naofarm-slot-{n}").as_bytes())?;
-            match UnixListener::bind_addr(&addr) {
-                Ok(l) => return Ok(Self { n, _name: l }),
-                Err(e) if e.kind() == io::ErrorKind::AddrInUse => {}
-                Err(e) => return Err(e),
+            if let Some(slot) = Self::bind(n)? {
+                return Ok(slot);
             }
         }
         Err(io::Error::other(
             "all 65536 slot numbers of this host are taken",
         ))
+    }
+
+    /// Slot `n`, or `None` when another process holds it.
+    fn bind(n: u32) -> io::Result<Option<Self>> {
+        use std::os::linux::net::SocketAddrExt;
+        let addr = SocketAddr::from_abstract_name(format!("naofarm-slot-{n}").as_bytes())?;
+        match UnixListener::bind_addr(&addr) {
+            Ok(l) => Ok(Some(Self { n, _name: l })),
+            Err(e) if e.kind() == io::ErrorKind::AddrInUse => Ok(None),
+            Err(e) => Err(e),
+        }
     }
 }
 
@@ -754,6 +773,21 @@ mod tests {
         drop(a);
         let c = Slot::claim().expect("again");
         assert!(c.n <= n || c.n != b.n);
+    }
+
+    #[test]
+    fn a_preferred_slot_is_claimed_when_free_and_passed_when_held() {
+        // A number far above what lowest-free claims reach, free.
+        let far = 60_000 + std::process::id() % 5_000;
+        let a = Slot::claim_preferring(&[far]).expect("the preferred slot");
+        assert_eq!(a.n, far);
+        // Held: the preference passes it (and the next preferred) for a
+        // free one.
+        let b = Slot::claim_preferring(&[far, far]).expect("another slot");
+        assert_ne!(b.n, far);
+        drop(a);
+        let c = Slot::claim_preferring(&[far]).expect("the preferred slot again");
+        assert_eq!(c.n, far);
     }
 
     #[test]

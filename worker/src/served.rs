@@ -229,6 +229,15 @@ impl Pool {
         }
     }
 
+    /// The slots in which a process of `program` is kept idle for `run`.
+    pub(crate) fn kept_slots(&self, run: &str, program: &str) -> Vec<u32> {
+        let idle = self.idle.lock().unwrap_or_else(PoisonError::into_inner);
+        idle.iter()
+            .filter(|s| s.run == run && s.name == program)
+            .map(|s| s.slot)
+            .collect()
+    }
+
     /// The idle process kept for `run` in `slot` for `program`, if any, and
     /// those kept there for an earlier build of it.
     fn take(&self, run: &str, slot: u32, program: &Program) -> (Option<Served>, Vec<Served>) {

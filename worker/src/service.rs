@@ -279,7 +279,10 @@ async fn run_program(
     pool: Arc<crate::served::Pool>,
 ) -> (Result<crate::Measurement, String>, f64) {
     let started = Instant::now();
-    let r = match crate::job::Slot::claim() {
+    // The slots this worker keeps the run's program in, first: another
+    // slot would start another process and leave those idle.
+    let kept = pool.kept_slots(&req.run, &program.name);
+    let r = match crate::job::Slot::claim_preferring(&kept) {
         Ok(slot) => {
             let dir = run_dir.join(format!("slot-{}", slot.n));
             let r =
