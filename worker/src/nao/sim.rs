@@ -40,6 +40,8 @@ pub const SANE_SPIN_RAD_S: f64 = 500.0;
 /// cycle (226 rad/s) while every body stayed below [`SANE_SPIN_RAD_S`].
 pub const SANE_JOINT_SPEED_RAD_S: f64 = 150.0;
 /// SimSpark's drag coefficient (force per velocity, torque per angular velocity).
+/// rapier's multibody maps the torque on a link other than the torso
+/// wrongly, and the walk leans on it: docs/walk.md, "Limits that remain".
 pub const DRAG: f64 = 0.01;
 const GRAVITY: f64 = 9.81;
 /// With firm stops, limit rows are solved again after the contacts once a
